@@ -419,6 +419,7 @@ class Optics:
         lens = self.lenslets()
         usable = [ln for ln in lens if ln.fraction >= 0.5]
         tan_edge = float(np.max(self.tan_theta(np.array([ln.u for ln in lens]))))
+        regimes = [self.illumination_regime(ln) for ln in lens]
         return {
             "ei_radius_um": self.ei_radius_um,                           # Eq. 8
             "iris_radius_um": self.iris_radius_nip_um,                   # Eq. 9
@@ -445,7 +446,21 @@ class Optics:
             "nyquist_voxel_xy_um": r_xy / 2,
             "nyquist_voxel_z_um": rz_ffl / 2,
             "max_tan_theta": tan_edge,
+            "lenslets_brightfield": regimes.count("brightfield"),
+            "lenslets_straddling": regimes.count("straddling"),
+            "lenslets_darkfield": regimes.count("darkfield"),
         }
+
+    def illumination_regime(self, lenslet: Lenslet) -> str:
+        """Where a lenslet's sub-aperture lies relative to the source disk (DESIGN.md §4.2):
+        'brightfield' (wholly inside: defocus contrast only), 'straddling' (DPC-like
+        contrast) or 'darkfield' (wholly outside: second order in the weak-object model)."""
+        na_k = self.wavelength_um * math.hypot(*lenslet.u)
+        if na_k + self.subaperture_na <= self.condenser_na:
+            return "brightfield"
+        if na_k - self.subaperture_na >= self.condenser_na:
+            return "darkfield"
+        return "straddling"
 
 
 def design_table(optics: Optics) -> str:
@@ -469,6 +484,8 @@ def design_table(optics: Optics) -> str:
         ("DOF, usable (smaller of the two)", f"{d['dof_um']:.2f}", "µm"),
         ("Lenslets overlapping the pupil", f"{d['lenslets_in_pupil']}", ""),
         ("Usable lenslets (>= 50% inside the pupil)", f"{d['lenslets_usable']}", ""),
+        ("Lenslets inside / straddling / outside the source disk",
+         f"{d['lenslets_brightfield']} / {d['lenslets_straddling']} / {d['lenslets_darkfield']}", ""),
         ("Nyquist voxel, lateral (R_xy / 2)", f"{d['nyquist_voxel_xy_um']:.2f}", "µm"),
         ("Nyquist voxel, axial (R_z / 2)", f"{d['nyquist_voxel_z_um']:.2f}", "µm"),
     ]

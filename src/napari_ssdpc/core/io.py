@@ -1,0 +1,111 @@
+"""Readers and writers: raw frames (TIFF), volumes (OME-TIFF), JSON.
+
+Every writer goes through :func:`atomic_write`: the file appears complete or not at
+all, so an error never leaves a half-written file over a good one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+import warnings
+from pathlib import Path
+
+import numpy as np
+import tifffile
+
+from .errors import SsdpcError, SsdpcWarning
+
+
+@contextlib.contextmanager
+def atomic_write(path):
+    """Yield a temporary path next to ``path``; move it over ``path`` only on success."""
+    path = Path(path)
+    if path.parent and not path.parent.exists():
+        raise SsdpcError(f"output folder does not exist: {path.parent} (create it first)")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent or ".")
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def read_frame(path, *, allow_series: bool = True) -> np.ndarray:
+    """Read a raw light-field frame (y, x) or series (t, y, x) from a TIFF/OME-TIFF."""
+    path = Path(path)
+    if not path.is_file():
+        raise SsdpcError(f"file not found: {path} (check the path)")
+    try:
+        data = tifffile.imread(path)
+    except Exception as e:  # tifffile raises many types for foreign files
+        raise SsdpcError(f"{path}: not a readable TIFF ({type(e).__name__}); give a TIFF or OME-TIFF frame") from None
+    data = np.squeeze(data)
+    if data.ndim == 3 and not allow_series:
+        raise SsdpcError(f"{path}: holds {data.shape[0]} frames; give a single frame (y, x)")
+    if data.ndim not in (2, 3):
+        raise SsdpcError(f"{path}: expected a 2D frame or a (t, y, x) series, got shape {data.shape}")
+    return data
+
+
+def check_frame(frame, *, shape=None, name="frame", saturation_level=None) -> np.ndarray:
+    """Validate a raw frame and return it as float32. One-line errors name the fix.
+
+    Warns (SsdpcWarning) with the saturated fraction when pixels sit at the top of the
+    range (``saturation_level`` or the integer dtype's maximum).
+    """
+    a = np.asarray(frame)
+    if a.dtype.kind not in "uif":
+        raise SsdpcError(f"{name}: dtype {a.dtype} is not numeric; give a grey-level camera frame")
+    if a.ndim != 2:
+        raise SsdpcError(f"{name}: expected a 2D frame (y, x), got shape {a.shape}")
+    if shape is not None and tuple(a.shape) != tuple(shape):
+        raise SsdpcError(f"{name}: shape {a.shape} does not match the calibration {tuple(shape)}; "
+                         "calibrate on a frame from the same camera and binning")
+    if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+        bad = int(np.size(a) - np.count_nonzero(np.isfinite(a)))
+        raise SsdpcError(f"{name}: {bad} non-finite pixels (NaN/inf); replace them or re-export the frame")
+    top = saturation_level
+    if top is None and a.dtype.kind in "ui":
+        top = np.iinfo(a.dtype).max
+    if top is not None:
+        frac = float(np.mean(a >= top))
+        if frac > 1e-4:
+            warnings.warn(f"{name}: {100 * frac:.2f}% of pixels are saturated; shorten the exposure",
+                          SsdpcWarning, stacklevel=2)
+    return a.astype(np.float32, copy=False)
+
+
+def write_tiff(path, data, *, metadata=None, **kwargs) -> Path:
+    """Write a (multi-page) TIFF atomically."""
+    path = Path(path)
+    with atomic_write(path) as tmp:
+        tifffile.imwrite(tmp, np.asarray(data), metadata=metadata, **kwargs)
+    return path
+
+
+def write_ome_tiff(path, data, *, axes: str, voxel_um=None, description: dict | None = None) -> Path:
+    """Write an OME-TIFF with physical pixel sizes (µm) and a JSON description in the
+    OME metadata. ``axes`` like 'ZYX' or 'TZYX'; ``voxel_um`` is (dz, dy, dx)."""
+    meta = {"axes": axes}
+    if voxel_um is not None:
+        dz, dy, dx = (float(v) for v in voxel_um)
+        meta.update(PhysicalSizeZ=dz, PhysicalSizeZUnit="µm", PhysicalSizeY=dy, PhysicalSizeYUnit="µm",
+                    PhysicalSizeX=dx, PhysicalSizeXUnit="µm")
+    if description:
+        meta["Description"] = json.dumps(description)
+    path = Path(path)
+    with atomic_write(path) as tmp:
+        tifffile.imwrite(tmp, np.asarray(data), ome=True, metadata=meta)
+    return path
+
+
+def write_json(path, obj) -> Path:
+    path = Path(path)
+    with atomic_write(path) as tmp:
+        tmp.write_text(json.dumps(obj, indent=2))
+    return path

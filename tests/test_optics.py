@@ -1,0 +1,123 @@
+"""Optics model and design calculator (paper Eqs. 8-14)."""
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+import yaml
+
+from napari_ssdpc.core.errors import SsdpcError, SsdpcWarning
+from napari_ssdpc.core.optics import PAPER_OPTICS, Optics, circle_overlap_fraction
+
+
+
+@pytest.fixture
+def paper():
+    return Optics.paper()
+
+
+def test_shared_yaml_matches_builtin(paper, shared_optics_path):
+    assert Optics.from_yaml(shared_optics_path).to_dict() | {"name": ""} == paper.to_dict() | {"name": ""}
+
+
+@pytest.mark.parametrize("key, expected", [
+    ("fov_um", 122.5), ("r_xy_um", 3.90), ("dof_fwhm_um", 132.53), ("dof_full_um", 265.06),
+    ("dof_pitch_um", 919.1), ("r_z_ffl_um", 20.6), ("r_z_printed_um", 4.2)])
+def test_design_reproduces_paper_within_half_percent(paper, key, expected):
+    tol = 0.005 if key not in ("r_z_ffl_um", "r_z_printed_um") else 0.01  # the paper prints R_z to 2-3 digits
+    assert paper.design()[key] == pytest.approx(expected, rel=tol)
+
+
+def test_derived_quantities(paper):
+    assert paper.m_ei == pytest.approx(4.08)
+    assert paper.object_pixel_um == pytest.approx(0.8456, abs=1e-4)
+    assert paper.subaperture_na == pytest.approx(0.4 / 6)
+    assert paper.f_obj_um == pytest.approx(10000.0)
+    assert paper.m_r == pytest.approx(0.375)
+    assert paper.ei_radius_px == pytest.approx(250 / 3.45)
+
+
+def test_lenslet_table_is_balanced_with_signs(paper):
+    lens = paper.lenslets()
+    assert len(lens) == 32  # 6 x 6 minus the four corners outside the pupil
+    halves = {h: sum(h in ln.halves for ln in lens) for h in ("up", "down", "left", "right")}
+    assert halves == {"up": 16, "down": 16, "left": 16, "right": 16}
+    for ln in lens:
+        # u_k = -a / (lambda f_obj m_r): a lenslet right of the axis sees light tilted toward -x
+        assert np.sign(ln.u[0]) == -np.sign(ln.a_um[0]) and np.sign(ln.u[1]) == -np.sign(ln.a_um[1])
+        assert math.hypot(*ln.u) * paper.wavelength_um == pytest.approx(math.hypot(*ln.a_um) / 3750.0)
+    fr = sorted(ln.fraction for ln in lens)
+    assert fr[0] == pytest.approx(0.59, abs=0.01) and fr[-1] == 1.0
+
+
+def test_axis_offset_moves_lenslets(paper):
+    lens = {(l.row, l.col): l for l in paper.lenslets(axis_offset_um=(100.0, -50.0))}
+    assert lens[(0, 0)].a_um == pytest.approx((150.0, 300.0))
+
+
+def test_circle_overlap_fraction_exact_cases():
+    assert circle_overlap_fraction(0.0, 1.0, 2.0) == pytest.approx(1.0)
+    assert circle_overlap_fraction(3.5, 1.0, 2.0) == pytest.approx(0.0)
+    # equal circles at distance r: lens area = (2pi/3 - sqrt(3)/2) r^2
+    assert circle_overlap_fraction(1.0, 1.0, 1.0) == pytest.approx((2 * math.pi / 3 - math.sqrt(3) / 2) / math.pi)
+    # Monte Carlo check of a partial overlap
+    rng = np.random.default_rng(0)
+    p = rng.uniform(-1, 1, (400000, 2))
+    p = p[np.hypot(*p.T) <= 1] + [1.7, 0]
+    assert circle_overlap_fraction(1.7, 1.0, 2.0) == pytest.approx(np.mean(np.hypot(*p.T) <= 2.0), abs=3e-3)
+
+
+def _with(path, mutate):
+    d = yaml.safe_load(yaml.safe_dump(PAPER_OPTICS))
+    mutate(d)
+    path.write_text(yaml.safe_dump(d))
+    return path
+
+
+@pytest.mark.parametrize("mutate, words", [
+    (lambda d: d["mla"].pop("pitch_um"), "missing key 'mla.pitch_um'"),
+    (lambda d: d["mla"].update(pitch_mm=d["mla"].pop("pitch_um") / 1000), "rename the key"),
+    (lambda d: d.update(wavelength_um=520), "check the unit"),
+    (lambda d: d["sensor"].update(pixel_um=-3.45), "must be positive"),
+    (lambda d: d["mla"].update(grid="hex"), "unknown MLA grid 'hex'"),
+    (lambda d: d.update(condenser_na=0.4), "no phase contrast with a split detection pupil"),
+    (lambda d: d.update(colour="red"), "unknown key 'colour'"),
+    (lambda d: d.update(reconstruction={"dz_um": 0}), "dz_um must be > 0"),
+])
+def test_bad_yaml_gives_one_line_error(tmp_path, mutate, words):
+    path = _with(tmp_path / "o.yaml", mutate)
+    with pytest.raises(SsdpcError) as e:
+        Optics.from_yaml(path)
+    assert words in str(e.value) and "\n" not in str(e.value)
+
+
+def test_missing_file_and_bad_syntax(tmp_path):
+    with pytest.raises(SsdpcError, match="not found"):
+        Optics.from_yaml(tmp_path / "nope.yaml")
+    (tmp_path / "bad.yaml").write_text("wavelength_um: [0.5\n")
+    with pytest.raises(SsdpcError, match="not valid YAML"):
+        Optics.from_yaml(tmp_path / "bad.yaml")
+
+
+def test_high_condenser_na_warns(paper):
+    with pytest.warns(SsdpcWarning, match="phase contrast is weak"):
+        paper.replace(condenser_na=0.35)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        paper.replace(condenser_na=0.3)  # sigma 0.75: no warning
+
+
+def test_yaml_round_trip(tmp_path, paper):
+    o = paper.replace(flip_x=True, iris_radius_um=1000.0)
+    o.to_yaml(tmp_path / "o.yaml")
+    assert Optics.from_yaml(tmp_path / "o.yaml") == o
+
+
+def test_illumination_regimes_follow_condenser_na(paper):
+    # sigma 0.25: the four central lenslets straddle the source edge, the rest see dark field
+    d = paper.design()
+    assert (d["lenslets_brightfield"], d["lenslets_straddling"], d["lenslets_darkfield"]) == (0, 4, 28)
+    # a condenser of 0.3 NA fully covers the central sub-apertures (0.094 + 0.067 < 0.3)
+    d = paper.replace(condenser_na=0.3).design()
+    assert d["lenslets_brightfield"] == 4 and d["lenslets_darkfield"] + d["lenslets_straddling"] == 28
