@@ -1,0 +1,50 @@
+"""The ssdpc command: outputs, one-line errors, exit codes."""
+
+import json
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from napari_ssdpc.cli import main
+
+
+def test_design_table_and_json(capsys):
+    assert main(["design"]) == 0
+    out = capsys.readouterr().out
+    assert "Field of view D_FOV (Eq. 10)" in out and "122.55" in out and "20.68" in out and "4.22" in out
+    assert main(["design", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["dof_full_um"] == pytest.approx(265.06, rel=5e-3) and d["lenslets_in_pupil"] == 32
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["design", "--optics", "missing.yaml"], "optics file not found"),
+    (["calibrate", "missing.tif", "-o", "c.json"], "file not found"),
+])
+def test_bad_input_is_one_line_error(tmp_path, monkeypatch, capsys, argv, words):
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("ssdpc: error:") and words in err and "\n" not in err
+    assert "Traceback" not in err
+
+
+def test_console_script_is_installed():
+    exe = shutil.which("ssdpc") or shutil.which("ssdpc", path=str(__import__("pathlib").Path(sys.executable).parent))
+    assert exe, "the ssdpc console script is not on PATH"
+    r = subprocess.run([exe, "design", "--optics", "nope.yaml"], capture_output=True, text=True)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
+
+
+def test_napari_manifest_validates():
+    npe2 = pytest.importorskip("npe2")
+    pm = npe2.PluginManager.instance()
+    pm.discover()
+    mf = pm.get_manifest("napari-ssdpc")
+    assert mf.name == "napari-ssdpc"
+    assert all(c.id.startswith("napari-ssdpc.") for c in mf.contributions.commands)
+    r = subprocess.run([sys.executable, "-m", "npe2", "validate", "napari-ssdpc", "--imports"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
