@@ -69,15 +69,32 @@ def check_frame(frame, *, shape=None, name="frame", saturation_level=None) -> np
     if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
         bad = int(np.size(a) - np.count_nonzero(np.isfinite(a)))
         raise SsdpcError(f"{name}: {bad} non-finite pixels (NaN/inf); replace them or re-export the frame")
-    top = saturation_level
-    if top is None and a.dtype.kind in "ui":
-        top = np.iinfo(a.dtype).max
-    if top is not None:
-        frac = float(np.mean(a >= top))
-        if frac > 1e-4:
-            warnings.warn(f"{name}: {100 * frac:.2f}% of pixels are saturated; shorten the exposure",
-                          SsdpcWarning, stacklevel=2)
+    warn_saturation(a, name=name, level=saturation_level)
     return a.astype(np.float32, copy=False)
+
+
+def saturated_fraction(frame, level=None) -> float:
+    """Fraction of pixels at the top of the range: ``level``, else the full scale of an
+    integer frame (2**b − 1 for a b-bit camera in a 16-bit container, b in 8..16)."""
+    a = np.asarray(frame)
+    top = level
+    if top is None:
+        if a.dtype.kind not in "ui" or a.size == 0:
+            return 0.0
+        m = int(a.max())
+        if m + 1 not in {2**b for b in range(8, 17)}:
+            return 0.0
+        top = m
+    return float(np.mean(a >= top))
+
+
+def warn_saturation(frame, name="frame", level=None, threshold=1e-4) -> float:
+    """Warn (SsdpcWarning) with the saturated fraction when it exceeds ``threshold``."""
+    frac = saturated_fraction(frame, level)
+    if frac > threshold:
+        warnings.warn(f"{name}: {100 * frac:.3f}% of pixels are saturated; shorten the exposure or lower the "
+                      "illumination", SsdpcWarning, stacklevel=3)
+    return frac
 
 
 def write_tiff(path, data, *, metadata=None, **kwargs) -> Path:
