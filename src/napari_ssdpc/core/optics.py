@@ -28,8 +28,12 @@ RECONSTRUCTION_DEFAULTS = {
     "rl_iterations": 15,
     "tikhonov_alpha": 1e-2,
     "model": "lenslet",
+    "method": "wotf",
 }
 TRANSFER_MODELS = ("lenslet", "paper")
+#: 'wotf': 3D Tikhonov over all views with their defocused WOTFs; 'rl': the paper's route
+#: (Richardson-Lucy per half, DPC per slice, 2D Tikhonov with the in-focus DPC transfer function).
+PHASE_METHODS = ("wotf", "rl")
 
 # Sanity ranges: a value outside them almost always means a wrong unit.
 _RANGES = {
@@ -270,6 +274,8 @@ class Optics:
         rec = self.reconstruction
         if rec.get("model") not in TRANSFER_MODELS:
             raise SsdpcError(f"reconstruction.model must be one of {', '.join(TRANSFER_MODELS)}, got {rec.get('model')!r}")
+        if rec.get("method") not in PHASE_METHODS:
+            raise SsdpcError(f"reconstruction.method must be one of {', '.join(PHASE_METHODS)}, got {rec.get('method')!r}")
         if not float(rec["dz_um"]) > 0:
             raise SsdpcError(f"reconstruction.dz_um must be > 0, got {rec['dz_um']}")
         if not float(rec["z_max_um"]) >= float(rec["z_min_um"]):

@@ -7,9 +7,14 @@ Per frame (paper §2 and §3.2, DESIGN.md §4):
    each deconvolved by multi-view Richardson–Lucy with the wave-optics PSF (Eq. 6) into an
    intensity stack I_κ(z);
 3. DPC stacks (Eq. 1) with every slice normalised by the z-summed background of the pair, so
-   that a slice holds only its own contrast; Tikhonov phase per slice (Eq. 7) with the in-focus
-   DPC transfer function of the chosen model; Δn = λφ/(2π dz) and n = n_medium + Δn;
-   absorption from the sum of the four stacks.
+   that a slice holds only its own contrast; absorption from the sum of the four stacks.
+4. Phase, by one of two methods:
+   - 'rl' (the paper's route): Tikhonov phase per slice (Eq. 7) from the DPC stacks with the
+     in-focus DPC transfer function of the chosen model;
+   - 'wotf' (default): 3D Tikhonov over all flat-fielded views with each lenslet's defocused
+     weak-object transfer function (core/phase3d.py). It uses the same physics without the
+     detour through an incoherent-PSF deconvolution; docs/validation.md compares the two.
+   Then Δn = λφ/(2π dz) and n = n_medium + Δn.
 
 Lenslets that receive no direct light at this condenser NA (dark field) carry no first-order
 phase signal (DESIGN.md §4.2) and are left out of the halves.
@@ -31,7 +36,8 @@ from .dpc import dpc_image, phase_to_delta_n, tikhonov_phase
 from .errors import SsdpcError, SsdpcWarning
 from .lenslets import Calibration, extract_views
 from .io import warn_saturation
-from .optics import TRANSFER_MODELS, Optics
+from .optics import PHASE_METHODS, TRANSFER_MODELS, Optics
+from .phase3d import WotfInversion
 from .psf import LensletPSF
 
 HALVES = ("up", "down", "left", "right")
@@ -62,6 +68,10 @@ def estimate_dark(frame, calibration: Calibration) -> float:
     return float(np.median(img[yy[far], xx[far]]))
 
 
+class Cancelled(SsdpcError):
+    """The caller asked to stop (``should_stop`` returned True)."""
+
+
 @dataclass
 class Result:
     """Reconstruction of one frame. Arrays are (z, y, x) with coordinates in µm."""
@@ -90,7 +100,8 @@ class Reconstructor:
     flat-field, the PSF operators of each half and the DPC transfer functions."""
 
     def __init__(self, optics: Optics, calibration: Calibration, *, z=None, dz=None, iterations=None,
-                 alpha=None, model=None, flat=None, dark=None, min_light: float = 0.05, progress=None):
+                 alpha=None, model=None, method=None, flat=None, dark=None, stacks: bool = True,
+                 min_light: float = 0.05, progress=None):
         rec = optics.reconstruction
         self.optics = optics
         self.calibration = calibration
@@ -106,6 +117,10 @@ class Reconstructor:
         self.model = model or rec.get("model", "lenslet")
         if self.model not in TRANSFER_MODELS:
             raise SsdpcError(f"unknown transfer model '{self.model}'; use one of {', '.join(TRANSFER_MODELS)}")
+        self.method = method or rec.get("method", "wotf")
+        if self.method not in PHASE_METHODS:
+            raise SsdpcError(f"unknown phase method '{self.method}'; use one of {', '.join(PHASE_METHODS)}")
+        self.with_stacks = bool(stacks) or self.method == "rl"
         self._check_depth_of_field()
         t0 = time.perf_counter()
         self.dark = None if dark is None else float(dark)
@@ -134,7 +149,7 @@ class Reconstructor:
         else:
             # without a flat, expect each lenslet's direct light from the transfer model
             fv = None
-        level = self._direct_light(fv)
+        self.level = level = self._direct_light(fv)
         lit = level >= min_light * level.max()
         if not lit.any():
             raise SsdpcError("no lenslet receives direct light; check the flat frame and the condenser NA")
@@ -163,6 +178,13 @@ class Reconstructor:
         return np.asarray(i0, float)
 
     def _build_operators(self, progress):
+        if self.with_stacks:
+            self._build_rl(progress)
+        if self.method == "wotf":
+            self.wotf = WotfInversion(self.optics, self.lenslets, self.mask.shape, self.pixel_um, self.z_um,
+                                      self.alpha, i0=self.level[self.lit])
+
+    def _build_rl(self, progress):
         opt = self.optics
         shape = self.mask.shape
         self.psf = LensletPSF(opt, self.lenslets, shape, self.pixel_um,
@@ -209,38 +231,44 @@ class Reconstructor:
         t0 = time.perf_counter()
         views = self.preprocess(frame)
         t1 = time.perf_counter()
-        stacks, history = {}, {}
-        total = len(HALVES) * self.iterations
-        for j, (h, rl) in enumerate(self.rl.items()):
-            cb = None if progress is None else (lambda i, n, j=j: progress(j * self.iterations + i, total, "RL"))
-            res = rl.run(views[self.halves[h]], self.iterations, progress=cb, should_stop=should_stop)
-            stacks[h], history[h] = res.stack, res.relative_change
-            if should_stop is not None and should_stop():
-                break
+        stacks, history, dpc, absorption = {}, {}, {}, None
+        if self.with_stacks:
+            total = len(HALVES) * self.iterations
+            for j, (h, rl) in enumerate(self.rl.items()):
+                cb = None if progress is None else (lambda i, n, j=j: progress(j * self.iterations + i, total, "RL"))
+                res = rl.run(views[self.halves[h]], self.iterations, progress=cb, should_stop=should_stop)
+                stacks[h], history[h] = res.stack, res.relative_change
+                if should_stop is not None and should_stop():
+                    raise Cancelled("reconstruction cancelled")
+            dpc, absorption = self.dpc_from_stacks(stacks)
         t2 = time.perf_counter()
-        dpc, phase, absorption = self.phase_from_stacks(stacks)
+        if self.method == "wotf":
+            phase = self.wotf.phase(np.where(self.view_mask, views - 1.0, 0.0)) * self.mask
+        else:
+            phase = tikhonov_phase([dpc["ud"], dpc["lr"]], [self.h_dpc["ud"], self.h_dpc["lr"]], self.alpha) * self.mask
         dn = phase_to_delta_n(phase, self.optics.wavelength_um, self.dz)
         t3 = time.perf_counter()
-        return Result(ri=(self.optics.medium_index + dn).astype(np.float32), delta_n=dn, phase=phase,
-                      absorption=absorption, dpc=dpc, stacks=stacks, z_um=self.z_um.copy(), y_um=self.y_um.copy(),
-                      x_um=self.x_um.copy(), convergence=history,
+        return Result(ri=(self.optics.medium_index + dn).astype(np.float32), delta_n=dn,
+                      phase=phase.astype(np.float32), absorption=absorption, dpc=dpc, stacks=stacks,
+                      z_um=self.z_um.copy(), y_um=self.y_um.copy(), x_um=self.x_um.copy(), convergence=history,
                       timings={"preprocess_s": t1 - t0, "rl_s": t2 - t1, "phase_s": t3 - t2},
                       settings=self.settings())
 
-    def phase_from_stacks(self, stacks):
-        """DPC stacks (Eq. 1), Tikhonov phase per slice (Eq. 7), absorption."""
+    def dpc_from_stacks(self, stacks):
+        """DPC stacks (Eq. 1), each slice normalised by the pair's z-summed intensity, and the
+        absorption μ per slice from the sum of the four stacks."""
         dpc = {}
         for ax, (a, b) in PAIRS.items():
             background = np.sum(stacks[a] + stacks[b], axis=0)   # the pair's total intensity per pixel
-            dpc[ax] = dpc_image(stacks[a], stacks[b], background=background) * self.mask
-        phase = tikhonov_phase([dpc["ud"], dpc["lr"]], [self.h_dpc["ud"], self.h_dpc["lr"]], self.alpha)
+            dpc[ax] = (dpc_image(stacks[a], stacks[b], background=background) * self.mask).astype(np.float32)
         total = sum(stacks[h] for h in HALVES)
         slice_bg = np.median(total[:, self.mask], axis=1)[:, None, None]
         # intensity ≈ I0 (1 − 2μ) at low frequencies (H_abs(0) = 2 I0): μ per slice
         absorption = -0.5 * (total - slice_bg) / np.maximum(np.sum(total, axis=0), 1e-12) * self.mask
-        return dpc, phase.astype(np.float32) * self.mask, absorption.astype(np.float32)
+        return dpc, absorption.astype(np.float32)
 
     def settings(self) -> dict:
         return {"z_min_um": float(self.z_um[0]), "z_max_um": float(self.z_um[-1]), "dz_um": self.dz,
                 "rl_iterations": self.iterations, "tikhonov_alpha": self.alpha, "model": self.model,
+                "method": self.method,
                 "lenslets_used": [[ln.row, ln.col] for ln in self.lenslets]}
