@@ -12,6 +12,8 @@ import sys
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 from . import __version__
 from .core.errors import SsdpcError, SsdpcWarning
 
@@ -60,25 +62,21 @@ def cmd_calibrate(args):
 
 
 def make_phantom(name, optics, *, n_frames=20):
-    """Phantom (or list of phantoms for 'moving') and the optics to simulate it with."""
-    from .core import simulate as sim
+    """Phantom (a list of phantoms for 'moving') and the optics with the phantom's medium."""
+    from .core import phantoms
 
-    if name == "bead":
-        return sim.pmma_bead(), optics
-    if name == "two-beads":
-        return sim.two_beads(), optics
-    if name == "cell":
-        return sim.cell(), optics.replace(medium_index=1.33)
-    if name == "bars":
-        return sim.bar_target(), optics
-    if name == "moving":
-        return sim.moving_sample(n_frames), optics.replace(medium_index=1.33)
-    raise SsdpcError(f"unknown phantom '{name}'; choose one of {', '.join(PHANTOMS)}")
+    makers = {"bead": phantoms.pmma_bead, "two-beads": phantoms.two_beads, "cell": phantoms.cell,
+              "bars": phantoms.bar_target, "moving": lambda: phantoms.moving_sample(n_frames)}
+    if name not in makers:
+        raise SsdpcError(f"unknown phantom '{name}'; choose one of {', '.join(PHANTOMS)}")
+    ph = makers[name]()
+    first = ph[0] if isinstance(ph, list) else ph
+    if first.medium_index is not None:
+        optics = optics.replace(medium_index=float(first.medium_index))
+    return ph, optics
 
 
 def cmd_simulate(args):
-    import numpy as np
-
     from .core import simulate as sim
     from .core.grid import Grid
     from .core.io import write_tiff
@@ -102,6 +100,99 @@ def cmd_simulate(args):
     if args.white:
         write_tiff(args.white, sim.white_frame(optics, grid=grid, rng=rng))
         print(f"wrote white frame {args.white}")
+
+
+SAVE_CHOICES = ("phase", "dpc", "stacks", "absorption", "delta_n")
+
+
+def _result_images(result, save):
+    """{name: (array, axes, description)} of the requested outputs of one frame."""
+    out = {"ri": (result.ri, "ZYX", "refractive index")}
+    if "delta_n" in save:
+        out["delta_n"] = (result.delta_n, "ZYX", "refractive-index difference to the medium")
+    if "phase" in save:
+        out["phase"] = (result.phase, "ZYX", "phase per slab, rad")
+    if "absorption" in save:
+        out["absorption"] = (result.absorption, "ZYX", "absorption mu per slab")
+    if "dpc" in save:
+        out["dpc"] = (np.stack([result.dpc["ud"], result.dpc["lr"]]), "CZYX", "DPC up-down, left-right")
+    if "stacks" in save:
+        out["stacks"] = (np.stack([result.stacks[h] for h in ("up", "down", "left", "right")]), "CZYX",
+                         "RL intensity stacks up, down, left, right")
+    return out
+
+
+def _output_paths(out: Path, names):
+    """OME-TIFF: RI in OUT.ome.tif, the others beside it as OUT_<name>.ome.tif."""
+    stem = out.name[: -len(".ome.tif")] if out.name.endswith(".ome.tif") else out.stem
+    return {n: out if n == "ri" else out.with_name(f"{stem}_{n}.ome.tif") for n in names}
+
+
+def cmd_reconstruct(args):
+    from .core.io import read_frame, write_ome_tiff
+    from .core.lenslets import Calibration
+    from .core.pipeline import Reconstructor
+    from .core.progress import tqdm_callback
+
+    out = _check_output(args.output)
+    is_zarr = out.suffix == ".zarr"
+    if not (is_zarr or out.name.endswith((".tif", ".tiff"))):
+        raise SsdpcError(f"output {out.name}: give a .ome.tif (one frame) or a .zarr (time series) path")
+    save = [s.strip() for s in (args.save or "").split(",") if s.strip()]
+    bad = [s for s in save if s not in SAVE_CHOICES]
+    if bad:
+        raise SsdpcError(f"--save {','.join(bad)}: unknown output; choose from {','.join(SAVE_CHOICES)}")
+    cal = Calibration.from_json(args.calibration)
+    optics = cal.optics if args.optics is None else _optics(args.optics)
+    raw = read_frame(args.raw)
+    flat = read_frame(args.flat, allow_series=False) if args.flat else None
+    frames = raw[None] if raw.ndim == 2 else raw
+    if len(frames) > 1 and not is_zarr:
+        raise SsdpcError(f"{args.raw} holds {len(frames)} frames; write a time series to OME-Zarr (-o OUT.zarr)")
+    z = args.z if args.z is not None else None
+    with tqdm_callback("building operators", unit="plane") as cb:
+        rec = Reconstructor(optics, cal, z=z, dz=args.dz, iterations=args.iterations, alpha=args.alpha,
+                            model=args.model, method=args.method, flat=flat,
+                            stacks=bool({"dpc", "stacks", "absorption"} & set(save)),
+                            progress=lambda i, n, label="": cb(i, n))
+    meta = {"software": f"napari-ssdpc {__version__}", "settings": rec.settings(), "optics": optics.to_dict(),
+            "calibration": {k: v for k, v in cal.to_dict().items() if k != "lenslets"}}
+    if is_zarr:
+        _reconstruct_series(frames, rec, out, save, meta)
+        return
+    with tqdm_callback("reconstructing", unit="iteration") as cb:
+        result = rec.reconstruct(frames[0], progress=lambda i, n, label="": cb(i, n))
+    images = _result_images(result, save)
+    paths = _output_paths(out, images)
+    for name, (data, axes, what) in images.items():
+        write_ome_tiff(paths[name], data, axes=axes, voxel_um=result.voxel_um,
+                       description={**meta, "quantity": what, "z_um": result.z_um.tolist()})
+    print(f"wrote {', '.join(str(p) for p in paths.values())}")
+    _print_summary(result)
+
+
+def _reconstruct_series(frames, rec, out, save, meta):
+    """Frame by frame into (t, z, y, x) OME-Zarr images, one chunk per frame."""
+    from tqdm.auto import tqdm
+
+    from .core.io import create_ome_zarr
+
+    arrays = {}
+    for t, frame in enumerate(tqdm(frames, desc="frames", unit="frame", file=sys.stderr)):
+        result = rec.reconstruct(np.asarray(frame))
+        for name, (data, axes, what) in _result_images(result, save).items():
+            if name not in arrays:
+                arrays[name] = create_ome_zarr(out, name, (len(frames),) + data.shape, "T" + axes,
+                                               result.voxel_um, attrs={**meta, "quantity": what},
+                                               overwrite=True)
+            arrays[name][t] = data
+    print(f"wrote {out} ({len(frames)} frames: {', '.join(arrays)})")
+
+
+def _print_summary(result):
+    dn = result.delta_n
+    print(f"volume {dn.shape} (z, y, x), voxel {result.voxel_um[0]:g} x {result.voxel_um[1]:.4f} x "
+          f"{result.voxel_um[2]:.4f} µm; delta n from {dn.min():+.4f} to {dn.max():+.4f}")
 
 
 def cmd_demo(args):
@@ -141,6 +232,21 @@ def build_parser():
     s.add_argument("--frames", type=int, default=20, help="frames of the 'moving' time series")
     s.add_argument("--seed", type=int, default=0, help="random seed of the camera noise")
     s.set_defaults(func=cmd_simulate)
+
+    s = sub.add_parser("reconstruct", help="reconstruct the 3D refractive index of a raw frame or time series")
+    s.add_argument("raw", help="raw light-field frame or (t, y, x) series, TIFF/OME-TIFF")
+    s.add_argument("--optics", help="optics YAML; default: the optics stored in the calibration")
+    s.add_argument("--calibration", required=True, help="calibration JSON from `ssdpc calibrate`")
+    s.add_argument("--flat", help="flat frame (no sample, same condenser NA) for flat-fielding")
+    s.add_argument("--z", type=float, nargs=2, metavar=("ZMIN", "ZMAX"), help="z range in µm (default -80 80)")
+    s.add_argument("--dz", type=float, help="slice spacing in µm (default 1)")
+    s.add_argument("--iterations", type=int, help="Richardson-Lucy iterations (default 15)")
+    s.add_argument("--alpha", type=float, help="Tikhonov regularisation (default 0.01)")
+    s.add_argument("--model", choices=("lenslet", "paper"), help="transfer-function model (default lenslet)")
+    s.add_argument("--method", choices=("wotf", "rl"), help="phase method (default wotf, see docs/validation.md)")
+    s.add_argument("--save", help=f"extra outputs, comma separated: {','.join(SAVE_CHOICES)}")
+    s.add_argument("-o", "--output", required=True, help="OUT.ome.tif (one frame) or OUT.zarr (time series)")
+    s.set_defaults(func=cmd_reconstruct)
 
     s = sub.add_parser("demo", help="simulate the paper's PMMA bead and process it end to end")
     s.add_argument("-o", "--output", default="ssdpc-demo", help="output folder (default ./ssdpc-demo)")

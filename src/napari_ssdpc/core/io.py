@@ -27,8 +27,11 @@ def atomic_write(path):
         raise SsdpcError(f"output folder does not exist: {path.parent} (create it first)")
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent or ".")
     os.close(fd)
+    umask = os.umask(0)
+    os.umask(umask)
     try:
         yield Path(tmp)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the usual permissions
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
@@ -126,3 +129,55 @@ def write_json(path, obj) -> Path:
     with atomic_write(path) as tmp:
         tmp.write_text(json.dumps(obj, indent=2))
     return path
+
+
+# ------------------------------------------------------------------ OME-Zarr
+def ngff_multiscales(axes: str, voxel_um, name: str) -> list:
+    """OME-NGFF 0.4 ``multiscales`` metadata for one resolution level '0'.
+    ``axes`` like 'ZYX' or 'TZYX'; ``voxel_um`` is (dz, dy, dx); time steps are in frames."""
+    kinds = {"T": ("t", "time", None), "C": ("c", "channel", None), "Z": ("z", "space", "micrometer"),
+             "Y": ("y", "space", "micrometer"), "X": ("x", "space", "micrometer")}
+    ax = []
+    for a in axes.upper():
+        n, t, u = kinds[a]
+        ax.append({"name": n, "type": t, **({"unit": u} if u else {})})
+    scale = [1.0] * (len(axes) - 3) + [float(v) for v in voxel_um]
+    return [{"version": "0.4", "name": name, "axes": ax,
+             "datasets": [{"path": "0", "coordinateTransformations": [{"type": "scale", "scale": scale}]}]}]
+
+
+def create_ome_zarr(path, name: str, shape, axes: str, voxel_um, chunks=None, attrs: dict | None = None,
+                    dtype="float32", overwrite=False):
+    """Create (or open for appending) the image group ``path/name`` of an OME-Zarr store.
+    Returns the zarr array of level '0'. One chunk per frame by default."""
+    import zarr
+
+    root = zarr.open_group(str(path), mode="a", zarr_format=2)
+    if name in root and not overwrite:
+        arr = root[name]["0"]
+        if tuple(arr.shape) != tuple(shape):
+            raise SsdpcError(f"{path}/{name} holds shape {tuple(arr.shape)}, not {tuple(shape)}; "
+                             "write to a new output or delete the old store")
+        return arr
+    grp = root.create_group(name, overwrite=True)
+    grp.attrs["multiscales"] = ngff_multiscales(axes, voxel_um, name)
+    if attrs:
+        grp.attrs["napari_ssdpc"] = attrs
+    chunks = chunks or ((1,) * (len(shape) - 3) + tuple(shape[-3:]))
+    return grp.create_array("0", shape=tuple(shape), chunks=tuple(chunks), dtype=dtype, fill_value=np.nan)
+
+
+def read_ome_zarr(path, name: str = "ri"):
+    """(data, voxel_um, attrs) of an image group written by :func:`create_ome_zarr`."""
+    import zarr
+
+    path = Path(path)
+    if not path.exists():
+        raise SsdpcError(f"file not found: {path} (check the path)")
+    root = zarr.open_group(str(path), mode="r")
+    if name not in root:
+        raise SsdpcError(f"{path} has no '{name}' image; it holds {', '.join(sorted(root.group_keys()))}")
+    grp = root[name]
+    ms = grp.attrs["multiscales"][0]
+    scale = ms["datasets"][0]["coordinateTransformations"][0]["scale"]
+    return grp["0"], tuple(scale[-3:]), dict(grp.attrs.get("napari_ssdpc", {}))

@@ -11,13 +11,12 @@ from tqdm.auto import tqdm
 @contextlib.contextmanager
 def tqdm_callback(desc: str, unit: str = "step"):
     """A ``progress(done, total)`` callable that drives a tqdm bar on stderr."""
-    bar = tqdm(desc=desc, unit=unit, file=sys.stderr, leave=False, dynamic_ncols=True)
+    bar = tqdm(desc=desc, unit=unit, file=sys.stderr, leave=False, dynamic_ncols=True, mininterval=0.5)
 
-    def update(done, total):
+    def update(done, total, *_):
         if bar.total != total:
-            bar.total = total
-        bar.n = done
-        bar.refresh()
+            bar.reset(total=total)
+        bar.update(done - bar.n)
 
     try:
         yield update

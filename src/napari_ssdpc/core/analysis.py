@@ -1,0 +1,67 @@
+"""Measurements on reconstructed volumes: profiles, FWHM, centroids, correlation with truth."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+
+def fwhm(x, y) -> float:
+    """Full width at half maximum of the main peak of ``y(x)`` (linear interpolation).
+    A negative-going peak (e.g. Δn of a low-index bead) is measured on −y."""
+    x = np.asarray(x, float)
+    y = np.asarray(y, float)
+    if abs(y.min()) > abs(y.max()):
+        y = -y
+    i = int(np.argmax(y))
+    half = y[i] / 2
+    if not half > 0:
+        return float("nan")
+    left = i
+    while left > 0 and y[left - 1] > half:
+        left -= 1
+    right = i
+    while right < len(y) - 1 and y[right + 1] > half:
+        right += 1
+    if left == 0 or right == len(y) - 1:
+        return float("nan")  # the peak does not fall to half within the range
+    xl = np.interp(half, [y[left - 1], y[left]], [x[left - 1], x[left]])
+    xr = np.interp(half, [y[right + 1], y[right]], [x[right + 1], x[right]])
+    return float(xr - xl)
+
+
+def peak_region(volume, sign: int = 0, level: float = 0.5, seed=None):
+    """Boolean mask of the connected region around the extremum (or ``seed`` index) where
+    sign·volume exceeds ``level`` times the extremum; ``sign`` 0 picks the larger |extremum|."""
+    v = np.asarray(volume, float)
+    if sign == 0:
+        sign = 1 if v.max() >= -v.min() else -1
+    s = sign * v
+    seed = tuple(np.unravel_index(np.argmax(s), s.shape)) if seed is None else tuple(seed)
+    labels, _ = ndimage.label(s > level * s[seed])
+    return labels == labels[seed]
+
+
+def centroid(volume, coords, sign: int = 0, level: float = 0.5, seed=None) -> np.ndarray:
+    """Weighted centroid (in the units of ``coords``, one 1D array per axis) of the peak region."""
+    v = np.asarray(volume, float)
+    mask = peak_region(v, sign, level, seed)
+    w = np.abs(v) * mask
+    grids = np.meshgrid(*coords, indexing="ij")
+    return np.array([float(np.sum(w * g) / np.sum(w)) for g in grids])
+
+
+def line_through(volume, coords, point, axis: int):
+    """Profile of ``volume`` along ``axis`` through the voxel nearest ``point`` (µm per axis)."""
+    idx = [int(np.argmin(np.abs(np.asarray(c) - p))) for c, p in zip(coords, point)]
+    sl = tuple(slice(None) if a == axis else i for a, i in enumerate(idx))
+    return np.asarray(coords[axis]), np.asarray(volume)[sl]
+
+
+def correlation(a, b, mask=None) -> float:
+    """Pearson correlation of two arrays (inside ``mask``)."""
+    a = np.asarray(a, float)
+    b = np.asarray(b, float)
+    if mask is not None:
+        a, b = a[mask], b[mask]
+    return float(np.corrcoef(a.ravel(), b.ravel())[0, 1])
