@@ -198,7 +198,7 @@ def _print_summary(result):
 def cmd_demo(args):
     from .demo import run_demo
 
-    run_demo(Path(args.output), optics=_optics(args.optics), seed=args.seed)
+    run_demo(Path(args.output), optics=None if args.optics is None else _optics(args.optics), seed=args.seed)
 
 
 # ------------------------------------------------------------------------- parser

@@ -35,6 +35,7 @@ def kernels_to_otf(kernels, fft_shape, workers=-1):
 class RLResult:
     stack: np.ndarray                      # (Z, ny, nx) deconvolved intensity
     relative_change: list = field(default_factory=list)  # ||o_{i+1} - o_i|| / ||o_i|| per iteration
+    stopped: bool = False                  # should_stop() asked to stop early
 
 
 class MultiViewRL:
@@ -83,7 +84,7 @@ class MultiViewRL:
             mean = float(np.sum(y) / max(np.sum(self.mask), 1))
             init = np.full((self.z,) + self.fft_shape, mean / max(self.z, 1), np.float32)
         obj = np.asarray(init, np.float32) * self.support
-        history = []
+        history, stopped = [], False
         eps = np.float32(1e-6 * max(float(y.max()), 1e-12))
         for i in range(iterations):
             est = self.forward(obj)
@@ -94,6 +95,7 @@ class MultiViewRL:
             if progress is not None:
                 progress(i + 1, iterations)
             if should_stop is not None and should_stop():
+                stopped = True
                 break
         ny, nx = self.view_shape
-        return RLResult(obj[:, :ny, :nx], history)
+        return RLResult(obj[:, :ny, :nx], history, stopped)

@@ -238,7 +238,7 @@ class Reconstructor:
                 cb = None if progress is None else (lambda i, n, j=j: progress(j * self.iterations + i, total, "RL"))
                 res = rl.run(views[self.halves[h]], self.iterations, progress=cb, should_stop=should_stop)
                 stacks[h], history[h] = res.stack, res.relative_change
-                if should_stop is not None and should_stop():
+                if res.stopped:
                     raise Cancelled("reconstruction cancelled")
             dpc, absorption = self.dpc_from_stacks(stacks)
         t2 = time.perf_counter()
