@@ -241,7 +241,7 @@ def build_parser():
     s.add_argument("--z", type=float, nargs=2, metavar=("ZMIN", "ZMAX"), help="z range in µm (default -80 80)")
     s.add_argument("--dz", type=float, help="slice spacing in µm (default 1)")
     s.add_argument("--iterations", type=int, help="Richardson-Lucy iterations (default 15)")
-    s.add_argument("--alpha", type=float, help="Tikhonov regularisation (default 0.01)")
+    s.add_argument("--alpha", type=float, help="Tikhonov regularisation (default 0.1 for wotf, 0.01 for rl)")
     s.add_argument("--model", choices=("lenslet", "paper"), help="transfer-function model (default lenslet)")
     s.add_argument("--method", choices=("wotf", "rl"), help="phase method (default wotf, see docs/validation.md)")
     s.add_argument("--save", help=f"extra outputs, comma separated: {','.join(SAVE_CHOICES)}")

@@ -26,7 +26,7 @@ RECONSTRUCTION_DEFAULTS = {
     "z_max_um": 80.0,
     "dz_um": 1.0,
     "rl_iterations": 15,
-    "tikhonov_alpha": 1e-2,
+    "tikhonov_alpha": None,   # None: the method's default (DEFAULT_ALPHA)
     "model": "lenslet",
     "method": "wotf",
 }
@@ -34,6 +34,9 @@ TRANSFER_MODELS = ("lenslet", "paper")
 #: 'wotf': 3D Tikhonov over all views with their defocused WOTFs; 'rl': the paper's route
 #: (Richardson-Lucy per half, DPC per slice, 2D Tikhonov with the in-focus DPC transfer function).
 PHASE_METHODS = ("wotf", "rl")
+#: Tikhonov alpha per method: 'rl' on the |H_DPC|² scale of Eq. 7, 'wotf' relative to the strongest
+#: view's |H|² summed over z (docs/validation.md).
+DEFAULT_ALPHA = {"wotf": 0.1, "rl": 0.01}
 
 # Sanity ranges: a value outside them almost always means a wrong unit.
 _RANGES = {
@@ -282,7 +285,7 @@ class Optics:
             raise SsdpcError("reconstruction.z_max_um must be >= z_min_um")
         if int(rec["rl_iterations"]) < 1:
             raise SsdpcError(f"reconstruction.rl_iterations must be >= 1, got {rec['rl_iterations']}")
-        if not float(rec["tikhonov_alpha"]) > 0:
+        if rec["tikhonov_alpha"] is not None and not float(rec["tikhonov_alpha"]) > 0:
             raise SsdpcError(f"reconstruction.tikhonov_alpha must be > 0, got {rec['tikhonov_alpha']}")
         self.check_condenser()
 

@@ -36,7 +36,7 @@ from .dpc import dpc_image, phase_to_delta_n, tikhonov_phase
 from .errors import SsdpcError, SsdpcWarning
 from .lenslets import Calibration, extract_views
 from .io import warn_saturation
-from .optics import PHASE_METHODS, TRANSFER_MODELS, Optics
+from .optics import DEFAULT_ALPHA, PHASE_METHODS, TRANSFER_MODELS, Optics
 from .phase3d import WotfInversion
 from .psf import LensletPSF
 
@@ -111,15 +111,16 @@ class Reconstructor:
         self.iterations = int(rec["rl_iterations"] if iterations is None else iterations)
         if self.iterations < 1:
             raise SsdpcError(f"iterations must be >= 1, got {self.iterations}")
-        self.alpha = float(rec["tikhonov_alpha"] if alpha is None else alpha)
-        if not self.alpha > 0:
-            raise SsdpcError(f"alpha must be > 0, got {self.alpha}")
         self.model = model or rec.get("model", "lenslet")
         if self.model not in TRANSFER_MODELS:
             raise SsdpcError(f"unknown transfer model '{self.model}'; use one of {', '.join(TRANSFER_MODELS)}")
         self.method = method or rec.get("method", "wotf")
         if self.method not in PHASE_METHODS:
             raise SsdpcError(f"unknown phase method '{self.method}'; use one of {', '.join(PHASE_METHODS)}")
+        alpha = rec["tikhonov_alpha"] if alpha is None else alpha
+        self.alpha = float(DEFAULT_ALPHA[self.method] if alpha is None else alpha)
+        if not self.alpha > 0:
+            raise SsdpcError(f"alpha must be > 0, got {self.alpha}")
         self.with_stacks = bool(stacks) or self.method == "rl"
         self._check_depth_of_field()
         t0 = time.perf_counter()
