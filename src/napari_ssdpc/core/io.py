@@ -103,8 +103,12 @@ def warn_saturation(frame, name="frame", level=None, threshold=1e-4) -> float:
 def write_tiff(path, data, *, metadata=None, **kwargs) -> Path:
     """Write a (multi-page) TIFF atomically."""
     path = Path(path)
+    data = np.asarray(data)
+    kwargs.setdefault("photometric", "minisblack")   # a (3, H, W) series is frames, not RGB planes
+    if metadata is None and data.ndim == 3:
+        metadata = {"axes": "TYX"}
     with atomic_write(path) as tmp:
-        tifffile.imwrite(tmp, np.asarray(data), metadata=metadata, **kwargs)
+        tifffile.imwrite(tmp, data, metadata=metadata, **kwargs)
     return path
 
 
