@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import math
+from pathlib import Path
 
 import numpy as np
 from magicgui.widgets import ComboBox, Container, FileEdit, Label, PushButton
@@ -63,13 +64,13 @@ def world_line_profile(layer, world_start, world_end, n: int | None = None) -> d
 
 
 def orientation(world_start, world_end, labels) -> str:
-    """'xy', 'xz', 'yz', 'z (axial)', ... from the axes along which the line runs."""
+    """'xy', 'xz', 'yz', 'axial (z)', 'along x', ... from the axes along which the line runs."""
     d = np.abs(np.asarray(world_end, float) - np.asarray(world_start, float))
     moving = [lab for lab, v in zip(labels, d) if v > 1e-9 * max(d.max(), 1.0)]
     order = {"x": 0, "y": 1, "z": 2}
     moving = sorted(moving, key=lambda a: order.get(a, 3))
     if len(moving) == 1:
-        return f"{moving[0]} (axial)" if moving[0] == "z" else f"along {moving[0]}"
+        return "axial (z)" if moving[0] == "z" else f"along {moving[0]}"
     return "".join(moving) if len(moving) == 2 else "oblique"
 
 
@@ -99,6 +100,7 @@ class ProfileWidget(QWidget):
                                            self.info])
         self.figure = Figure(figsize=(4, 3), tight_layout=True)
         self.canvas = FigureCanvasQTAgg(self.figure)
+        self.canvas.setMinimumHeight(260)
         self.axes = self.figure.add_subplot(1, 1, 1)
         layout = QVBoxLayout(self)
         layout.addWidget(self.controls.native)
@@ -117,15 +119,23 @@ class ProfileWidget(QWidget):
 
     # ------------------------------------------------------------------ layers
     def _images(self, _w=None):
-        return [(lyr.name, lyr) for lyr in self.viewer.layers if lyr._type_string == "image" and lyr.ndim >= 2
-                and not lyr.rgb]
+        """Image layers, reconstruction results first, the top of the layer list first."""
+        layers = [lyr for lyr in reversed(self.viewer.layers) if lyr._type_string == "image" and lyr.ndim >= 2
+                  and not lyr.rgb]
+        results = [lyr for lyr in layers if lyr.metadata.get("ssdpc", {}).get("kind") == "result"]
+        return [(lyr.name, lyr) for lyr in results + [lyr for lyr in layers if lyr not in results]]
 
     def _shapes(self, _w=None):
-        return [(lyr.name, lyr) for lyr in self.viewer.layers if lyr._type_string == "shapes"]
+        """Shapes layers (not the calibration circles), the top of the layer list first."""
+        return [(lyr.name, lyr) for lyr in reversed(self.viewer.layers) if lyr._type_string == "shapes"
+                and lyr.metadata.get("ssdpc", {}).get("kind") != "calibration"]
 
     def _layers_changed(self, *_):
-        self.controls.reset_choices()
-        self._rewire()
+        try:
+            self.controls.reset_choices()
+            self._rewire()
+        except RuntimeError:  # the dock was closed and its Qt widgets deleted
+            pass
 
     def _rewire(self, *_):
         for emitter, cb in self._connected:
@@ -140,9 +150,12 @@ class ProfileWidget(QWidget):
         self.update()
 
     def _dims_changed(self, *_):
-        img = self.image.value
-        if img is not None and img.ndim > 3:     # a time series: the profile follows the slider
-            self.update()
+        try:
+            img = self.image.value
+            if img is not None and img.ndim > 3:     # a time series: the profile follows the slider
+                self.update()
+        except RuntimeError:  # the dock was closed and its Qt widgets deleted
+            pass
 
     def new_line_layer(self, *_):
         img = self.image.value
@@ -203,7 +216,7 @@ class ProfileWidget(QWidget):
         img = self.image.value
         info = img.metadata.get("ssdpc", {}) if img is not None else {}
         for p in self.profiles:
-            ax.plot(p["distance_um"], p["values"], label=f"line {p['line']} ({p['orientation']})")
+            ax.plot(p["distance_um"], p["values"], label=f"line {p['line']}: {p['orientation']}")
         ax.set_xlabel("distance (µm)")
         ax.set_ylabel(info.get("unit") or (img.name if img is not None else "value"))
         if self.profiles:
@@ -211,17 +224,28 @@ class ProfileWidget(QWidget):
         self.canvas.draw_idle()
 
     def export_csv(self, path):
-        """Write all profiles: line, orientation, sample, distance_um, world coordinates, value."""
-        if not self.profiles:
-            from napari.utils.notifications import show_error
+        """Write all profiles: line, orientation, sample, distance_um, world coordinates (µm; t in
+        frames), value. Returns the path, or None (with a notification) when there is nothing to
+        write or no file name."""
+        from napari.utils.notifications import show_error
 
+        if not self.profiles:
             show_error("no profile to export: draw a line in the lines layer first")
             return None
+        if not path or Path(path).is_dir():
+            show_error("choose a CSV file name first")
+            return None
         labels = self.profiles[0]["labels"]
-        with atomic_write(path) as tmp, open(tmp, "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(["line", "orientation", "sample", "distance_um", *(f"{a}_um" if a in "zyx" else a for a in labels), "value"])
-            for p in self.profiles:
-                for j, (d, xyz, v) in enumerate(zip(p["distance_um"], p["world"], p["values"])):
-                    w.writerow([p["line"], p["orientation"], j, f"{d:.6g}", *(f"{c:.6g}" for c in xyz), repr(float(v))])
+        try:
+            with atomic_write(path) as tmp, open(tmp, "w", newline="") as f:
+                w = csv.writer(f)
+                coords = [f"{a}_um" if a in ("z", "y", "x") else a for a in labels]
+                w.writerow(["line", "orientation", "sample", "distance_um", *coords, "value"])
+                for p in self.profiles:
+                    for j, (d, xyz, v) in enumerate(zip(p["distance_um"], p["world"], p["values"])):
+                        w.writerow([p["line"], p["orientation"], j, f"{d:.6g}", *(f"{c:.6g}" for c in xyz),
+                                    repr(float(v))])
+        except SsdpcError as e:
+            show_error(str(e))
+            return None
         return path

@@ -10,12 +10,14 @@ relays each report with ``yield``, so napari's progress bar and the widget's sta
 Cancel sets a stop flag that the core checks every iteration (``should_stop``) and that the
 progress callback checks at every report, so a job stops within one iteration. Layers are only
 touched in the ``yielded``/``returned`` callbacks, on the main thread. A ``SsdpcError`` from
-``core`` becomes a napari error notification with the core's one-line message.
+``core`` becomes a napari error notification with the core's one-line message, a
+``SsdpcWarning`` a napari warning (once per job).
 """
 
 from __future__ import annotations
 
 import queue
+import textwrap
 import threading
 import warnings
 import weakref
@@ -60,7 +62,7 @@ class Session:
         rec = self.optics.reconstruction
         spec = {"optics": self.optics, "calibration": None, "z": (float(rec["z_min_um"]), float(rec["z_max_um"])),
                 "dz": float(rec["dz_um"]), "model": rec["model"], "method": rec["method"], "stacks": True,
-                "alpha": float(rec["tikhonov_alpha"]), "flat": None}
+                "alpha": rec["tikhonov_alpha"], "flat": None}
         for ref in (self.operators_widget, self.reconstruct_widget):
             w = ref() if ref is not None else None
             if w is not None:
@@ -86,6 +88,7 @@ def session_for(viewer) -> Session:
     if ref is None or ref() is not viewer:
         session = Session()
         _SESSIONS[key] = (weakref.ref(viewer), session)
+        weakref.finalize(viewer, _SESSIONS.pop, key, None)     # free the operators with the viewer
     return session
 
 
@@ -175,6 +178,7 @@ class JobRunner:
         self.worker = None
         self._stop = None
         self._pbar = None
+        self._in_update = False
         cancel.enabled = False
         cancel.changed.connect(self.cancel)
 
@@ -187,14 +191,16 @@ class JobRunner:
             show_info(f"{self.title} is already running; cancel it first")
             return None
         self._stop = threading.Event()
+        self._warned = set()
         self._pbar = napari_progress(total=0, desc=label)
         self.status.value = f"{label}…"
         self.run_button.enabled = False
         self.cancel_button.enabled = True
         worker = create_worker(_job, fn, self._stop, _start_thread=False)
         worker.yielded.connect(self._on_progress)
+        worker.warned.connect(self._on_warning)
         worker.returned.connect(lambda out: self._on_returned(out, on_result))
-        worker.aborted.connect(self._stop.set)
+        worker.aborted.connect(self._on_aborted)
         worker.finished.connect(self._on_finished)
         self.worker = worker
         worker.start()
@@ -210,11 +216,31 @@ class JobRunner:
         pbar = self._pbar
         if pbar is None:
             return
-        if pbar.total != total:
-            pbar.total = total
-        pbar.set_description(label)
-        pbar.update(done - pbar.n)
         self.status.value = f"{label} {done}/{total}" if total else label
+        if self._in_update:        # napari's progress bar may process events while it repaints
+            return
+        self._in_update = True
+        try:
+            if pbar.total != total:
+                pbar.total = total
+            pbar.set_description(label)
+            pbar.update(done - pbar.n)
+        finally:
+            self._in_update = False
+
+    def _on_aborted(self):
+        """napari's own cancel (worker.quit): stop the core too."""
+        if self._stop is not None:
+            self._stop.set()
+        self.status.value = "cancelled"
+
+    def _on_warning(self, args):
+        """A warning raised while the job ran (worker.warned gives showwarning's arguments): core
+        warnings become napari warnings, each message once per job."""
+        message, category = args[0], args[1]
+        if issubclass(category, SsdpcWarning) and str(message) not in self._warned:
+            self._warned.add(str(message))
+            show_warning(str(message))
 
     def _on_returned(self, out: Outcome, on_result):
         if out.cancelled:
@@ -246,14 +272,18 @@ def _notify_error(e: Exception):
     show_error(str(e))
 
 
-def _image_layers(viewer, ndims=(2, 3), allow_none: str | None = None):
-    """Choices callable for a ComboBox of image layers."""
+def _image_layers(viewer, ndims=(2, 3), allow_none: str | None = None, prefer: str = ""):
+    """Choices callable for a ComboBox of raw image layers: the top of the layer list first, layers
+    whose name contains ``prefer`` before all others (the default choice), then ``allow_none``."""
     from napari.layers import Image
 
     def choices(_widget=None):
-        out = [(allow_none, None)] if allow_none else []
-        return out + [(lyr.name, lyr) for lyr in viewer.layers if isinstance(lyr, Image) and lyr.ndim in ndims
-                      and (lyr.metadata.get("ssdpc", {}).get("kind") != "result")]
+        layers = [lyr for lyr in reversed(viewer.layers) if isinstance(lyr, Image) and lyr.ndim in ndims
+                  and lyr.metadata.get("ssdpc", {}).get("kind") != "result"]
+        first = [lyr for lyr in layers if prefer and prefer in lyr.name.lower()]
+        rest = [lyr for lyr in layers if lyr not in first]
+        none = [(allow_none, None)] if allow_none else []
+        return [(lyr.name, lyr) for lyr in first] + none + [(lyr.name, lyr) for lyr in rest]
     return choices
 
 
@@ -265,11 +295,22 @@ def _calibration_layers(viewer):
 
 
 def _follow_layers(viewer, container: Container):
-    """Refresh the container's layer choices when layers come, go or are renamed."""
+    """Refresh the container's layer choices when layers come, go, move or are renamed (also when
+    the widget is used outside a dock); a closed widget is left alone."""
+    ref = weakref.ref(container)
+
+    def refresh(*_):
+        w = ref()
+        if w is not None:
+            try:
+                w.reset_choices()
+            except RuntimeError:  # the Qt widget was deleted with its dock
+                pass
+
     ev = viewer.layers.events
     for e in (ev.inserted, ev.removed, ev.reordered):
-        e.connect(container.reset_choices)
-    ev.inserted.connect(lambda event: event.value.events.name.connect(container.reset_choices))
+        e.connect(refresh)
+    ev.inserted.connect(lambda event: event.value.events.name.connect(refresh))
 
 
 def frame_index(viewer, layer) -> int | None:
@@ -281,13 +322,15 @@ def frame_index(viewer, layer) -> int | None:
 
 
 def show_layer(viewer, data, kwargs: dict, layer_type: str = "image"):
-    """Add a layer, or update the one of the same name in place (same object, same position)."""
+    """Add a layer, or update the one of the same name in place (same object, same position).
+    A layer whose dimensionality changes (a frame, then a series) is replaced at its position."""
     name = kwargs["name"]
     if name in viewer.layers:
         old = viewer.layers[name]
         if layer_type == "image" and old._type_string == "image" and old.ndim == np.ndim(data):
             old.data = data
-            for key in ("scale", "translate", "metadata", "colormap", "contrast_limits", "axis_labels", "units"):
+            # the display choices (colormap, rendering, ...) stay as the user left them
+            for key in ("scale", "translate", "metadata", "contrast_limits", "axis_labels", "units"):
                 if key in kwargs:
                     setattr(old, key, kwargs[key])
             return old
@@ -320,7 +363,8 @@ def _buttons(run_text: str, run_tip: str):
 # ================================================================================= optics
 # attribute, label, tooltip, (min, max, step) or "int"/"bool"
 OPTICS_FIELDS = [
-    ("wavelength_um", "wavelength (µm)", "vacuum wavelength of the illumination, µm (520 nm = 0.52)", (0.2, 2.0, 0.001)),
+    ("wavelength_um", "wavelength (µm)", "vacuum wavelength of the illumination, µm (520 nm = 0.52)",
+     (0.2, 2.0, 0.001)),
     ("medium_index", "medium index", "refractive index of the immersion / embedding medium (no unit)",
      (1.0, 2.5, 0.001)),
     ("condenser_na", "condenser NA", "illumination NA (no unit); must stay below the objective NA (σ < 1) "
@@ -343,18 +387,19 @@ OPTICS_FIELDS = [
 
 
 def design_text(optics: Optics) -> str:
-    """The design numbers (paper Eqs. 8-14) in a few lines."""
+    """The design numbers (paper Eqs. 8-14), a few short lines."""
     d = optics.design()
     return "\n".join([
-        f"FOV {d['fov_um']:.1f} µm · R_xy {d['r_xy_um']:.2f} µm · object pixel {d['object_pixel_um']:.4f} µm",
-        f"R_z {d['r_z_ffl_um']:.2f} µm (tanθ = √2·d/f_fl, matches the paper's measured 21.96 µm); "
-        f"{d['r_z_printed_um']:.2f} µm with Eq. 13 as printed",
-        f"DOF {d['dof_full_um']:.1f} µm full width (FWHM {d['dof_fwhm_um']:.1f} µm), usable {d['dof_um']:.1f} µm",
-        f"lenslets: {d['lenslets_in_pupil']} in the pupil, {d['lenslets_usable']} usable (≥ 50 % inside); "
-        f"{d['lenslets_brightfield']}/{d['lenslets_straddling']}/{d['lenslets_darkfield']} inside/straddling/"
-        "outside the source disk",
-        f"σ = {d['sigma']:.2f} · M_EI {d['m_ei']:.3f} · pitch {d['pitch_px']:.2f} px · EI radius "
-        f"{d['ei_radius_px']:.2f} px",
+        f"FOV {d['fov_um']:.1f} µm · R_xy {d['r_xy_um']:.2f} µm",
+        f"R_z {d['r_z_ffl_um']:.2f} µm (tanθ = √2·d/f_fl: matches the",
+        f"    paper's measured 21.96 µm); {d['r_z_printed_um']:.2f} µm with Eq. 13 as printed",
+        f"DOF {d['dof_full_um']:.1f} µm full width (FWHM {d['dof_fwhm_um']:.1f} µm)",
+        f"usable depth {d['dof_um']:.1f} µm",
+        f"lenslets: {d['lenslets_in_pupil']} in the pupil, {d['lenslets_usable']} usable (≥ 50 % inside)",
+        f"source disk: {d['lenslets_brightfield']} inside, {d['lenslets_straddling']} straddling, "
+        f"{d['lenslets_darkfield']} outside",
+        f"σ {d['sigma']:.2f} · M_EI {d['m_ei']:.3f} · object pixel {d['object_pixel_um']:.4f} µm",
+        f"pitch {d['pitch_px']:.2f} px · EI radius {d['ei_radius_px']:.2f} px",
     ])
 
 
@@ -362,7 +407,7 @@ class OpticsWidget(Container):
     """Load, edit and save the optics; the design numbers update live."""
 
     def __init__(self, napari_viewer):
-        super().__init__(labels=True)
+        super().__init__(labels=True, scrollable=True)
         self.viewer = napari_viewer
         self.session = session_for(napari_viewer)
         self.fields = {}
@@ -388,6 +433,7 @@ class OpticsWidget(Container):
         self.extend([self.path, self.load_button, self.save_button, self.paper_button, self.layer_button, self.name,
                      *self.fields.values(), self.design])
         self._last_error = None
+        self._updating = False
         self._show(self.session.optics)
         for w in [*self.fields.values(), self.name]:
             w.changed.connect(self._edited)
@@ -417,12 +463,12 @@ class OpticsWidget(Container):
         return v
 
     def _edited(self, *_):
-        if getattr(self, "_updating", False):
+        if self._updating:
             return
         try:
             optics = _catch_warnings(self.session.optics.replace, **self.values())
         except SsdpcError as e:
-            self.design.value = f"⚠ {e}"
+            self.design.value = "⚠ " + "\n".join(textwrap.wrap(str(e), 60))
             if str(e) != self._last_error:
                 show_error(str(e))
             self._last_error = str(e)
@@ -475,13 +521,14 @@ class CalibrateWidget(Container):
         super().__init__(labels=True)
         self.viewer = napari_viewer
         self.session = session_for(napari_viewer)
-        self.image = ComboBox(label="frame", choices=_image_layers(napari_viewer),
+        self.image = ComboBox(label="frame", choices=_image_layers(napari_viewer, prefer="white"),
                               tooltip="raw frame to calibrate on: best a white frame (condenser fully open); a "
                                       "flat or sample frame also works, less precisely (±0.5 px)")
         self.kind = ComboBox(label="frame kind", choices=["auto", "white", "flat", "sample"], value="auto",
                              tooltip="white: condenser fully open (σ = 1); flat/sample: the sample's condenser "
                                      "setting; auto: decided from the number of lit lenslets")
-        self.run_button, self.cancel_button, self.status = _buttons("Calibrate", "find the lattice and the optical axis")
+        self.run_button, self.cancel_button, self.status = _buttons("Calibrate",
+                                                                    "find the lattice and the optical axis")
         self.result = Label(value="")
         self.result.tooltip = "optical axis position (px), lenslet pitch (px), MLA rotation (degrees)"
         self.path = FileEdit(mode="w", filter="*.json")
@@ -573,13 +620,21 @@ class OperatorsWidget(Container):
         self.run_button.changed.connect(self.run)
         self.psf_button.changed.connect(self.show_psf)
         self.session.optics_loaded.connect(self._defaults)
-        self.session.operators_built.connect(lambda *_: self.lenslet.reset_choices())
+        self.session.optics_changed.connect(self._stale)
+        self.session.operators_built.connect(self._refresh_lenslets)
         _follow_layers(napari_viewer, self)
 
     def _defaults(self, optics):
         rec = optics.reconstruction
         self.z_min.value, self.z_max.value, self.dz.value = rec["z_min_um"], rec["z_max_um"], rec["dz_um"]
         self.model.value, self.method.value = rec["model"], rec["method"]
+
+    def _stale(self, _optics):
+        if self.session.built is not None and not self.runner.running:
+            self.status.value = "optics changed: the operators are rebuilt at the next run"
+
+    def _refresh_lenslets(self, _rec):
+        self.lenslet.reset_choices()
 
     def _lenslet_choices(self, _widget=None):
         rec = self.session.built[1] if self.session.built else None
@@ -669,15 +724,15 @@ class ReconstructWidget(Container):
         rec = self.session.optics.reconstruction
         self.raw = ComboBox(label="raw frame(s)", choices=_image_layers(napari_viewer),
                             tooltip="raw light-field frame (y, x) or series (t, y, x), camera units")
-        self.flat = ComboBox(label="flat frame", choices=_image_layers(napari_viewer, (2,), "none (model)"),
+        self.flat = ComboBox(label="flat frame", choices=_image_layers(napari_viewer, (2,), "none (model)", "flat"),
                              tooltip="flat frame (no sample) at the sample's condenser setting, for flat-fielding; "
                                      "none: each view is normalised by its median")
         self.iterations = SpinBox(label="RL iterations", min=1, max=10000, value=int(rec["rl_iterations"]),
                                   tooltip="Richardson–Lucy iterations per directional stack (no unit; 10–20 usual)")
-        self.alpha = FloatSpinBox(label="Tikhonov α", min=1e-6, max=100.0, step=1e-4,
-                                  value=float(rec["tikhonov_alpha"]),
-                                  tooltip="Tikhonov regularisation of the phase inversion, relative to the strongest"
-                                          " transfer function (no unit; paper Eq. 7)")
+        self.alpha = FloatSpinBox(label="Tikhonov α", min=0.0, max=100.0, step=1e-4,
+                                  value=float(rec["tikhonov_alpha"] or 0.0),
+                                  tooltip="Tikhonov regularisation of the phase inversion (no unit; paper Eq. 7), "
+                                          "relative to the strongest transfer function; 0 = the method's default")
         self.frames = ComboBox(label="frames", choices=["current frame", "all frames"], value="current frame",
                                tooltip="for a (t, y, x) series: only the frame on the time slider, or every frame "
                                        "into a (t, z, y, x) layer")
@@ -694,11 +749,12 @@ class ReconstructWidget(Container):
 
     def _defaults(self, optics):
         rec = optics.reconstruction
-        self.iterations.value, self.alpha.value = int(rec["rl_iterations"]), float(rec["tikhonov_alpha"])
+        self.iterations.value = int(rec["rl_iterations"])
+        self.alpha.value = float(rec["tikhonov_alpha"] or 0.0)
 
     def operator_settings(self) -> dict:
         flat = self.flat.value
-        return {"flat": None if flat is None else flat.data, "alpha": float(self.alpha.value)}
+        return {"flat": None if flat is None else flat.data, "alpha": float(self.alpha.value) or None}
 
     def quantities(self) -> list[str]:
         out = ["ri"]
@@ -717,27 +773,34 @@ class ReconstructWidget(Container):
         except SsdpcError as e:
             _notify_error(e)
             return None
+        wanted = self.quantities()
+        needs_rl = [q for q in wanted if q.startswith(("dpc", "stack")) or q == "absorption"]
+        if needs_rl and not spec["stacks"] and spec["method"] != "rl":
+            show_error(f"{needs_rl[0]} needs the directional stacks: tick 'directional stacks' in Operators")
+            return None
         data = layer.data
         t = frame_index(self.viewer, layer)
         series = t is not None and self.frames.value == "all frames"
         indices = list(range(data.shape[0])) if series else [t]
         built = self.session.matching(spec)
-        iterations, wanted = int(self.iterations.value), self.quantities()
+        iterations = int(self.iterations.value)
 
         def work(progress, should_stop):
             rec = built or build_reconstructor(spec, progress)
             rec.iterations = iterations           # a run-time setting: the operators do not depend on it
-            stacks, res = {}, None
+            collected, res = {}, None
             for i, ti in enumerate(indices):
+                if series:
+                    progress(i, len(indices), "reading frames")
                 frame = np.asarray(data if ti is None else data[ti])
-                label = f"frame {ti} ({i + 1}/{len(indices)})" if series else "RL"
-                res = rec.reconstruct(frame, progress=lambda d, n, lab: progress(d, n, f"{lab} {label}"),
+                prefix = f"frame {ti} ({i + 1}/{len(indices)}): " if series else ""
+                res = rec.reconstruct(frame, progress=lambda d, n, lab: progress(d, n, prefix + lab),
                                       should_stop=should_stop)
                 arrays = result_arrays(res)
                 for q in wanted:
                     if q in arrays:
-                        stacks.setdefault(q, []).append(arrays[q])
-            out = {q: (np.stack(v) if series else v[0]) for q, v in stacks.items()}
+                        collected.setdefault(q, []).append(arrays[q])
+            out = {q: (np.stack(v) if series else v[0]) for q, v in collected.items()}
             return rec, out, res
 
         return self.runner.start(work, lambda r: self._done(spec, layer.name, indices, *r), "Reconstruct")
@@ -750,8 +813,15 @@ class ReconstructWidget(Container):
                 "settings": res.settings, "frames": [i for i in indices if i is not None],
                 "optics": optics.to_dict()}
         origin = (float(res.z_um[0]), float(res.y_um[0]), float(res.x_um[0]))
+        first = f"{source} RI" not in self.viewer.layers
         for q, a in arrays.items():
             data, kwargs, _ = result_layer(a, q, res.voxel_um, origin, name=source, info=info)
             show_layer(self.viewer, data, kwargs)
+        if first:
+            # the raw frames live in sensor pixels, the results in µm: hide the inputs, show the volume
+            for lyr in self.viewer.layers:
+                if lyr.name == source or lyr.metadata.get("ssdpc", {}).get("kind") in ("raw", "calibration"):
+                    lyr.visible = False
+            self.viewer.fit_to_view(layers=[self.viewer.layers[f"{source} RI"]])
         shape = next(iter(arrays.values())).shape
         return f"{source}: {' × '.join(map(str, shape))} voxels of {' × '.join(f'{v:.3g}' for v in res.voxel_um)} µm"

@@ -1,0 +1,201 @@
+"""napari readers, writer and sample data (no viewer needed)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import tifffile
+
+from napari_ssdpc import _reader, _sample_data, _writer
+from napari_ssdpc.core.errors import SsdpcError
+from napari_ssdpc.core.io import write_ome_tiff
+from napari_ssdpc.core.lenslets import calibrate
+from napari_ssdpc.core.optics import Optics
+from napari_ssdpc.core.simulate import white_frame
+
+pytest.importorskip("napari")
+
+
+def _layers(path, get_reader):
+    reader = get_reader(str(path))
+    assert reader is not None, f"{get_reader.__name__} refused {path}"
+    return reader(str(path))
+
+
+# ------------------------------------------------------------------------ raw frames
+def test_raw_frame_reader(tmp_path):
+    frame = np.random.default_rng(0).integers(100, 4000, (96, 128), dtype=np.uint16)
+    p = tmp_path / "frame.tif"
+    tifffile.imwrite(p, frame)
+    [(data, kw, kind)] = _layers(p, _reader.get_raw_reader)
+    assert kind == "image" and data.shape == (96, 128) and "axis_labels" not in kw
+    assert np.array_equal(np.asarray(data), frame)
+    assert kw["metadata"]["ssdpc"]["kind"] == "raw" and kw["name"] == "frame"
+    # a plain multi-page TIFF (one page per frame, no metadata) is a (t, y, x) series
+    pages = tmp_path / "pages.tif"
+    for k in range(4):
+        tifffile.imwrite(pages, frame + k, append=True, metadata=None)
+    [(data, kw, _)] = _layers(pages, _reader.get_raw_reader)
+    assert data.shape == (4, 96, 128) and kw["axis_labels"] == ("t", "y", "x")
+    assert np.array_equal(np.asarray(data[3]), frame + 3)
+
+
+@pytest.mark.parametrize("compression", [None, "zlib"])
+def test_raw_series_reader_is_lazy(tmp_path, compression):
+    series = np.random.default_rng(1).integers(0, 4095, (3, 64, 80), dtype=np.uint16)
+    p = tmp_path / "series.ome.tif"
+    tifffile.imwrite(p, series, photometric="minisblack", metadata={"axes": "TYX"}, compression=compression,
+                     ome=True)
+    [(data, kw, _)] = _layers(p, _reader.get_raw_reader)
+    assert data.shape == (3, 64, 80) and kw["axis_labels"] == ("t", "y", "x")
+    if compression is None:
+        assert isinstance(data, np.memmap)          # pixels stay on disk until sliced
+    else:
+        import dask.array as da
+
+        assert isinstance(data, da.Array)           # compressed: lazily through tifffile's zarr store
+    assert np.array_equal(np.asarray(data[2]), series[2])
+
+
+def test_foreign_files_give_none(tmp_path):
+    rgb = tmp_path / "photo.tif"
+    tifffile.imwrite(rgb, np.zeros((64, 64, 3), np.uint8), photometric="rgb")
+    vol = tmp_path / "stack.ome.tif"
+    tifffile.imwrite(vol, np.zeros((5, 64, 64), np.float32), ome=True,
+                     metadata={"axes": "ZYX", "PhysicalSizeZ": 1.0, "PhysicalSizeX": 0.2, "PhysicalSizeY": 0.2})
+    text = tmp_path / "notes.tif"
+    text.write_text("not a tiff")
+    other_json = tmp_path / "other.json"
+    other_json.write_text(json.dumps({"format": "something-else"}))
+    for p in (rgb, vol, text, tmp_path / "missing.tif"):
+        assert _reader.get_raw_reader(str(p)) is None, p.name
+        assert _reader.get_result_reader(str(p)) is None, p.name
+    assert _reader.get_calibration_reader(str(other_json)) is None
+    assert _reader.get_calibration_reader(str(text)) is None
+    assert _reader.get_raw_reader([str(rgb), str(vol)]) is None
+    # our own reconstruction is not a raw frame
+    ours = tmp_path / "ri.ome.tif"
+    _writer.write_result(ours, np.zeros((4, 40, 40), np.float32), voxel_um=(2, 0.8, 0.8), info={"quantity": "ri"})
+    assert _reader.get_raw_reader(str(ours)) is None and _reader.get_result_reader(str(ours)) is not None
+    # an OME-TIFF volume from elsewhere (no napari-ssdpc description) is not a result
+    plain = tmp_path / "plain.ome.tif"
+    write_ome_tiff(plain, np.zeros((4, 40, 40), np.float32), axes="ZYX", voxel_um=(1, 1, 1))
+    assert _reader.get_result_reader(str(plain)) is None
+
+
+# ----------------------------------------------------------------------- calibration
+def test_calibration_reader_circles_and_labelled_centres(tmp_path):
+    optics = Optics.paper()
+    cal = calibrate(white_frame(optics, rng=np.random.default_rng(5)), optics)
+    p = cal.to_json(tmp_path / "calib.json")
+    (shapes, skw, sk), (pts, pkw, pk) = _layers(p, _reader.get_calibration_reader)
+    k = len(cal.lenslets)
+    assert (sk, pk) == ("shapes", "points") and skw["shape_type"] == "ellipse" and len(shapes) == k
+    centre = shapes[0].mean(axis=0)                       # ellipse corners -> centre (y, x)
+    assert np.allclose(centre[::-1], cal.centres_px[0], atol=1e-9)
+    assert np.allclose(np.ptp(shapes[0], axis=0), 2 * cal.ei_radius_px)
+    assert pts.shape == (k + 1, 2) and np.allclose(pts[:k, ::-1], cal.centres_px)
+    assert np.allclose(pts[k, ::-1], cal.grid.axis_px)
+    ln = cal.lenslets[3]
+    assert pkw["features"]["label"][3] == f"({ln.row}, {ln.col})" and pkw["features"]["label"][k] == "axis"
+    assert skw["metadata"]["ssdpc"]["calibration"] == json.loads(p.read_text())
+
+
+# ------------------------------------------------------------------ results: writer
+def test_ome_tiff_roundtrip_keeps_scale_and_labels(tmp_path):
+    vol = np.random.default_rng(2).normal(1.518, 0.01, (5, 30, 40)).astype(np.float32)
+    meta = {"name": "bead RI", "scale": (2.0, 0.8456, 0.8456), "translate": (-4.0, -12.0, -16.0),
+            "metadata": {"ssdpc": {"kind": "result", "quantity": "ri", "medium_index": 1.518,
+                                   "settings": {"rl_iterations": 3}}}}
+    [out] = _writer.write_volume(str(tmp_path / "bead.ome.tif"), vol, meta)
+    [(data, kw, _)] = _layers(out, _reader.get_result_reader)
+    assert np.array_equal(np.asarray(data), vol)
+    assert kw["scale"] == (2.0, 0.8456, 0.8456) and kw["translate"] == (-4.0, -12.0, -16.0)
+    assert kw["axis_labels"] == ("z", "y", "x") and kw["units"] == ("µm", "µm", "µm") and kw["name"] == "bead RI"
+    info = kw["metadata"]["ssdpc"]
+    assert info["quantity"] == "ri" and info["settings"] == {"rl_iterations": 3}
+    lo, hi = kw["contrast_limits"]
+    assert lo < 1.518 < hi and hi - 1.518 == pytest.approx(1.518 - lo)   # centred on the medium
+    with tifffile.TiffFile(out) as tif:                                     # standard OME sizes too
+        px = tifffile.xml2dict(tif.ome_metadata)["OME"]["Image"]["Pixels"]
+        assert (px["PhysicalSizeZ"], px["PhysicalSizeX"]) == (2.0, 0.8456)
+
+
+def test_ome_zarr_time_series_roundtrip(tmp_path):
+    import dask.array as da
+    import zarr
+
+    series = np.random.default_rng(3).normal(0, 1, (3, 4, 20, 24)).astype(np.float32)
+    meta = {"name": "cells phase", "scale": (1.0, 2.0, 0.85, 0.85), "translate": (0.0, -4.0, -8.0, -10.0),
+            "metadata": {"ssdpc": {"quantity": "phase"}}}
+    path = tmp_path / "cells.zarr"
+    _writer.write_volume(str(path), series, meta)
+    _writer.write_volume(str(path), series * 2, meta)            # overwrite: the group is replaced whole
+    ri_meta = {**meta, "name": "cells RI", "metadata": {"ssdpc": {"quantity": "ri", "medium_index": 1.33}}}
+    _writer.write_volume(str(path), series + 1.33, ri_meta)      # a second quantity in the same store
+    g = zarr.open_group(str(path / "phase"), mode="r")
+    ms = g.attrs["multiscales"][0]
+    assert [a["name"] for a in ms["axes"]] == ["t", "z", "y", "x"] and ms["axes"][1]["unit"] == "micrometer"
+    assert ms["datasets"][0]["coordinateTransformations"][0]["scale"] == [1.0, 2.0, 0.85, 0.85]
+    layers = _layers(path, _reader.get_result_reader)
+    (data, kw, _), (ri, rkw, _) = sorted(layers, key=lambda t: t[1]["name"], reverse=True)
+    assert isinstance(data, da.Array) and data.shape == (3, 4, 20, 24)
+    assert np.array_equal(np.asarray(data), series * 2) and np.array_equal(np.asarray(ri), series + 1.33)
+    assert kw["name"] == "cells phase" and rkw["name"] == "cells RI"
+    assert kw["axis_labels"] == ("t", "z", "y", "x") and kw["scale"] == (1.0, 2.0, 0.85, 0.85)
+    assert kw["translate"] == (0.0, -4.0, -8.0, -10.0)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cells.zarr"]   # no temporary folders left
+    with pytest.raises(SsdpcError, match="dimensions"):
+        _writer.write_volume(str(tmp_path / "x.ome.tif"), np.zeros((10, 10)), {"name": "raw"})
+
+
+# ----------------------------------------------------------------------- sample data
+def test_time_series_sample_is_lazy_20_frames(tmp_path, monkeypatch):
+    import dask.array as da
+
+    calls = []
+    monkeypatch.setattr(_sample_data, "series_frame", lambda i, n: calls.append(i) or np.zeros((2048, 2448), np.uint16))
+    layers = _sample_data.moving_sample_series()
+    series = layers[-1][0]
+    assert isinstance(series, da.Array) and series.shape == (20, 2048, 2448) and series.dtype == np.uint16
+    assert calls == []                               # nothing simulated until a frame is read
+    series[7].compute()
+    assert calls == [7]
+    assert layers[-1][1]["axis_labels"] == ("t", "y", "x")
+    assert layers[-1][1]["metadata"]["ssdpc"]["optics"]["medium_index"] == 1.33
+
+
+# ------------------------------------------------- outputs of `ssdpc reconstruct`
+def test_reads_the_cli_reconstruction_outputs(tmp_path):
+    """The result reader opens what `ssdpc reconstruct` writes, with µm scale and the view
+    centred on the optical axis; a series goes to OME-Zarr and opens as (t, z, y, x)."""
+    from napari_ssdpc.cli import main
+
+    frame, flat, white, optics = _sample_data.bead_frames()
+    tifffile.imwrite(tmp_path / "bead.tif", frame)
+    tifffile.imwrite(tmp_path / "flat.tif", flat)
+    tifffile.imwrite(tmp_path / "series.tif", np.stack([frame, frame]), photometric="minisblack",
+                     metadata={"axes": "TYX"})
+    calibrate(white, optics).to_json(tmp_path / "calib.json")
+    common = ["--calibration", str(tmp_path / "calib.json"), "--flat", str(tmp_path / "flat.tif"),
+              "--z", "-10", "10", "--dz", "2", "--iterations", "2"]
+    assert main(["reconstruct", str(tmp_path / "bead.tif"), *common, "--save", "phase,dpc",
+                 "-o", str(tmp_path / "out.ome.tif")]) == 0
+    [(ri, kw, _)] = _layers(tmp_path / "out.ome.tif", _reader.get_result_reader)
+    assert kw["name"] == "out RI" and ri.shape == (11, 145, 145)
+    assert np.allclose(kw["scale"], (2.0, optics.object_pixel_um, optics.object_pixel_um), rtol=2e-3)
+    assert kw["translate"][0] == -10.0 and kw["translate"][1] == pytest.approx(-72 * kw["scale"][1])
+    lo, hi = kw["contrast_limits"]
+    assert lo < optics.medium_index < hi
+    [(_, pkw, _)] = _layers(tmp_path / "out_phase.ome.tif", _reader.get_result_reader)
+    assert pkw["name"] == "out phase" and pkw["metadata"]["ssdpc"]["quantity"] == "phase"
+    dpc = _layers(tmp_path / "out_dpc.ome.tif", _reader.get_result_reader)
+    assert [k["name"] for _, k, _ in dpc] == ["out DPC up-down", "out DPC left-right"]
+    assert _reader.get_raw_reader(str(tmp_path / "out.ome.tif")) is None
+
+    assert main(["reconstruct", str(tmp_path / "series.tif"), *common, "-o", str(tmp_path / "s.zarr")]) == 0
+    [(data, skw, _)] = _layers(tmp_path / "s.zarr", _reader.get_result_reader)
+    assert data.shape == (2, 11, 145, 145) and skw["axis_labels"] == ("t", "z", "y", "x")
+    assert np.array_equal(np.asarray(data[1]), np.asarray(ri))

@@ -1,0 +1,229 @@
+"""The napari widgets end to end on the sample data (headless: Xvfb via pytest-xvfb).
+
+The bead frames are simulated once and cached (``_sample_data``); the operators use a reduced
+z range (-20..20 µm, dz 2 µm) and 3 RL iterations so that the whole module takes seconds.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("napari")
+pytest.importorskip("pytestqt")
+
+from napari_ssdpc import _sample_data, _widgets  # noqa: E402
+from napari_ssdpc.core.lenslets import calibrate  # noqa: E402
+from napari_ssdpc.core.pipeline import Reconstructor  # noqa: E402
+
+Z, DZ, ITER = (-20.0, 20.0), 2.0, 3
+WORKER_TIMEOUT_MS = 120_000
+
+
+@pytest.fixture(scope="module")
+def bead():
+    return _sample_data.bead_frames()          # frame, flat, white, optics (cached on disk)
+
+
+@pytest.fixture
+def errors(monkeypatch):
+    """Messages shown with napari's show_error by the widgets."""
+    shown = []
+    monkeypatch.setattr(_widgets, "show_error", lambda msg: shown.append(str(msg)))
+    return shown
+
+
+def _wait(qtbot, widget):
+    """Wait until the widget's running job has finished."""
+    worker = widget.runner.worker
+    if worker is not None:
+        with qtbot.waitSignal(worker.finished, timeout=WORKER_TIMEOUT_MS):
+            pass
+    qtbot.waitUntil(lambda: widget.runner.worker is None, timeout=5000)
+
+
+def _docks(viewer):
+    out = {}
+    for name, cls in (("optics", _widgets.OpticsWidget), ("calibrate", _widgets.CalibrateWidget),
+                      ("operators", _widgets.OperatorsWidget), ("reconstruct", _widgets.ReconstructWidget)):
+        out[name] = cls(viewer)
+        viewer.window.add_dock_widget(out[name], name=name)
+    return out
+
+
+def _setup_bead(viewer, qtbot, optics):
+    for data, kw, kind in _sample_data.pmma_bead_sample():
+        getattr(viewer, f"add_{kind}")(data, **kw)
+    w = _docks(viewer)
+    w["optics"].set_optics(optics)
+    w["calibrate"].image.value = viewer.layers["PMMA bead white frame"]
+    w["calibrate"].run()
+    _wait(qtbot, w["calibrate"])
+    op = w["operators"]
+    op.calibration.value = viewer.layers["PMMA bead white frame EI circles"]
+    op.z_min.value, op.z_max.value, op.dz.value = Z[0], Z[1], DZ
+    rc = w["reconstruct"]
+    rc.raw.value = viewer.layers["PMMA bead (raw light field)"]
+    rc.flat.value = viewer.layers["PMMA bead flat frame"]
+    rc.iterations.value, rc.alpha.value = ITER, 0.0      # α 0: the method's default
+    return w
+
+
+def test_end_to_end_bead(make_napari_viewer, qtbot, bead, errors):
+    frame, flat, white, optics = bead
+    viewer = make_napari_viewer()
+    w = _setup_bead(viewer, qtbot, optics)
+    cal_layer = viewer.layers["PMMA bead white frame EI circles"]
+    assert len(cal_layer.data) == 32 and "PMMA bead white frame EI centres" in viewer.layers
+    assert "pitch" in w["calibrate"].result.value
+
+    w["operators"].run()
+    _wait(qtbot, w["operators"])
+    assert w["operators"].status.value.startswith("built: 21 planes")
+    rec_built = _widgets.session_for(viewer).built[1]
+
+    w["reconstruct"].run()
+    _wait(qtbot, w["reconstruct"])
+    assert errors == []
+    assert _widgets.session_for(viewer).built[1] is rec_built           # operators reused, not rebuilt
+    ri = viewer.layers["PMMA bead (raw light field) RI"]
+    assert ri.data.shape == (21, 145, 145)
+    assert np.allclose(ri.scale, (DZ, optics.object_pixel_um, optics.object_pixel_um), rtol=2e-3)
+    assert tuple(ri.axis_labels) == ("z", "y", "x") and ri.translate[0] == Z[0]
+    assert ri.metadata["ssdpc"]["settings"]["rl_iterations"] == ITER
+
+    # exactly what core gives on the same input
+    cal = calibrate(white, optics)
+    res = Reconstructor(optics, cal, z=Z, dz=DZ, iterations=ITER, alpha=None, flat=flat).reconstruct(frame)
+    assert np.array_equal(ri.data, res.ri)
+    assert np.array_equal(ri.scale, res.voxel_um)
+    # the bead (n 1.49 in 1.518) is visible: Δn < 0 at its centre (world origin)
+    zc, yc, xc = np.round(ri.world_to_data((0.0, 0.0, 0.0))).astype(int)
+    assert ri.data[zc, yc, xc] - optics.medium_index < -0.002
+    # the inputs (sensor pixels) are hidden once the volume (µm) is there
+    assert ri.visible and not viewer.layers["PMMA bead (raw light field)"].visible
+
+    # rerun with more outputs: the RI layer is updated in place, new layers are named after the source
+    n_layers = len(viewer.layers)
+    w["reconstruct"].out_phase.value = True
+    w["reconstruct"].iterations.value = ITER + 1
+    w["reconstruct"].run()
+    _wait(qtbot, w["reconstruct"])
+    ri.colormap = "viridis"                      # a display choice of the user: kept on rerun
+    w["reconstruct"].run()
+    _wait(qtbot, w["reconstruct"])
+    assert viewer.layers["PMMA bead (raw light field) RI"] is ri and len(viewer.layers) == n_layers + 1
+    assert ri.colormap.name == "viridis"
+    assert ri.metadata["ssdpc"]["settings"]["rl_iterations"] == ITER + 1
+    phase = viewer.layers["PMMA bead (raw light field) phase"]
+    assert phase.data.shape == ri.data.shape and phase.colormap.name == "RdBu_r"
+
+    # the PSF stack of one lenslet, in µm
+    w["operators"].show_psf()
+    _wait(qtbot, w["operators"])
+    psf = viewer.layers["lenslet (-1, -1) PSF"]
+    rec = _widgets.session_for(viewer).built[1]
+    k = [(ln.row, ln.col) for ln in rec.lenslets].index((-1, -1))
+    assert np.array_equal(psf.data, rec.psf.kernels(rec.z_um)[k]) and psf.data.shape[0] == 21
+    assert np.allclose(psf.scale, (DZ, rec.pixel_um, rec.pixel_um))
+    assert errors == []
+
+
+def test_time_series_gives_tzyx_layer(make_napari_viewer, qtbot, errors):
+    optics = _sample_data.series_optics()
+    flat, white = _sample_data.series_flat_white()
+    series = _sample_data.series_array()[:3]          # first 3 frames of the sample series (lazy)
+    viewer = make_napari_viewer()
+    viewer.add_image(white, name="white")
+    viewer.add_image(flat, name="flat")
+    raw = viewer.add_image(series, name="cells", axis_labels=("t", "y", "x"))
+    w = _docks(viewer)
+    w["optics"].set_optics(optics)
+    w["calibrate"].image.value = viewer.layers["white"]
+    w["calibrate"].run()
+    _wait(qtbot, w["calibrate"])
+    w["operators"].calibration.value = viewer.layers["white EI circles"]
+    w["operators"].z_min.value, w["operators"].z_max.value, w["operators"].dz.value = Z[0], Z[1], DZ
+    rc = w["reconstruct"]
+    rc.raw.value, rc.flat.value, rc.iterations.value, rc.alpha.value = raw, viewer.layers["flat"], ITER, 0.0
+    rc.frames.value = "all frames"
+    rc.run()
+    _wait(qtbot, rc)
+    assert errors == []
+    ri = viewer.layers["cells RI"]
+    assert ri.data.shape == (3, 21, 145, 145) and tuple(ri.axis_labels) == ("t", "z", "y", "x")
+    assert ri.scale[0] == 1.0 and ri.scale[1] == DZ
+    assert "t" in viewer.dims.axis_labels
+    # frame 2 is the core's reconstruction of frame 2
+    cal = calibrate(white, optics)
+    rec = Reconstructor(optics, cal, z=Z, dz=DZ, iterations=ITER, flat=flat)
+    assert np.array_equal(ri.data[2], rec.reconstruct(np.asarray(series[2])).ri)
+    assert not np.array_equal(ri.data[0], ri.data[2])          # the sample moves
+
+
+def test_cancel_stops_a_running_reconstruction(make_napari_viewer, qtbot, bead, errors):
+    frame, flat, white, optics = bead
+    viewer = make_napari_viewer()
+    w = _setup_bead(viewer, qtbot, optics)
+    rc = w["reconstruct"]
+    rc.iterations.value = 5000                   # minutes of RL if not stopped
+    reports = []
+    worker = rc.run()
+    worker.yielded.connect(reports.append)
+    qtbot.waitUntil(lambda: any(r[2].startswith("RL") for r in reports), timeout=WORKER_TIMEOUT_MS)
+    t0 = time.perf_counter()
+    rc.cancel_button.native.click()              # the Cancel button
+    _wait(qtbot, rc)
+    stopped_s = time.perf_counter() - t0
+    rl = [r for r in reports if r[2].startswith("RL")]
+    assert rl[-1][0] < rl[-1][1] / 10            # far from the end of the 4 x 5000 iterations
+    assert stopped_s < 10.0, f"took {stopped_s:.1f} s to stop"
+    assert rc.status.value == "cancelled" and "PMMA bead (raw light field) RI" not in viewer.layers
+    assert rc.run_button.enabled and not rc.cancel_button.enabled
+    assert errors == []
+
+
+def test_core_errors_are_notifications(make_napari_viewer, qtbot, bead, errors, monkeypatch):
+    frame, flat, white, optics = bead
+    warned = []
+    monkeypatch.setattr(_widgets, "show_warning", lambda msg: warned.append(str(msg)))
+    viewer = make_napari_viewer()
+    w = _setup_bead(viewer, qtbot, optics)
+    assert warned == []
+    # a core warning raised in the worker thread: calibrating on the flat frame (σ < 1)
+    w["calibrate"].image.value = viewer.layers["PMMA bead flat frame"]
+    w["calibrate"].run()
+    _wait(qtbot, w["calibrate"])
+    assert len(warned) == 1 and warned[0].startswith("flat frame (σ = 0.25, 4 lit lenslets)")
+    # a frame that does not match the calibration
+    viewer.add_image(frame[:1024, :1024], name="cropped")
+    w["reconstruct"].raw.value = viewer.layers["cropped"]
+    w["reconstruct"].run()
+    _wait(qtbot, w["reconstruct"])
+    assert len(errors) == 1 and "differs from the calibration" in errors[0]
+    assert "\n" not in errors[0] and "cropped RI" not in viewer.layers
+    # sigma >= 1 in the optics editor
+    w["optics"].fields["condenser_na"].value = 0.5
+    assert len(errors) == 2 and "condenser_na 0.5 >= objective NA 0.4" in errors[1]
+    assert _widgets.session_for(viewer).optics.condenser_na == optics.condenser_na   # bad edit not applied
+    assert w["optics"].design.value.startswith("⚠")
+
+
+def test_optics_widget_design_numbers_are_live(make_napari_viewer, tmp_path):
+    viewer = make_napari_viewer()
+    ow = _widgets.OpticsWidget(viewer)
+    viewer.window.add_dock_widget(ow)
+    assert "FOV 122.5 µm" in ow.design.value and "R_xy 3.90 µm" in ow.design.value
+    assert "32 in the pupil" in ow.design.value
+    ow.fields["fourier_lens_mm"].value = 150.0          # twice the Fourier lens: M_EI halves, FOV doubles
+    d = _widgets.session_for(viewer).optics.design()
+    assert _widgets.session_for(viewer).optics.fourier_lens_mm == 150.0
+    assert d["fov_um"] == pytest.approx(2 * 122.55, rel=1e-3) and f"FOV {d['fov_um']:.1f} µm" in ow.design.value
+    p = tmp_path / "optics.yaml"
+    ow.save(p)
+    ow.set_optics(_widgets.Optics.paper())
+    ow.path.value = p
+    ow.load()
+    assert ow.fields["fourier_lens_mm"].value == 150.0
