@@ -60,3 +60,28 @@ def test_two_beads_found_at_their_depths(two_beads):
         assert abs(cz - z) < 5.0 and np.sign(cz) == np.sign(z)
         assert np.hypot(cx - x, cy - y) < 1.0
     assert metrics[0]["centroid_um"][2] < 0 < metrics[1]["centroid_um"][2]
+
+
+def test_cell_correlates_with_the_truth_at_the_system_resolution(cache):
+    case = val.simulate_case("cell", ph.cell(), val.paper_optics(), cache_dir=cache)
+    res, _, _ = val.reconstruct_case(case, z=(-40, 40), stacks=False)
+    m = val.cell_metrics(res, case.phantom, (20.7, 3.9))
+    assert m["correlation_blurred"] > 0.5                                 # measured 0.565
+    assert abs(m["ri_nucleus"] - m["ri_nucleus_blurred_truth"]) < 0.02    # measured 0.0095
+
+
+def test_bar_target_resolved_at_its_depth(cache):
+    case = val.simulate_case("bars", ph.bar_target(), val.paper_optics(), cache_dir=cache)
+    res, _, _ = val.reconstruct_case(case, z=(0, 80), method="rl", stacks=True)
+    m = val.bar_metrics(res, case.phantom)
+    assert abs(m["best_focus_z_um"] - case.phantom.z_um) < 5.0             # measured 38 µm
+    for period in (8.76, 6.2, 4.92):
+        assert m["contrast"][period] > 0.10                                 # measured 1.0, 1.0, 0.13
+
+
+@pytest.mark.xfail(strict=True, reason="measured contrast -0.01 at 15 RL iterations (0.09 at 40): 4.38 µm is "
+                   "at the sub-aperture cutoff (R_xy 3.9 µm)")
+def test_bar_target_finest_element_resolved(cache):
+    case = val.simulate_case("bars", ph.bar_target(), val.paper_optics(), cache_dir=cache)
+    res, _, _ = val.reconstruct_case(case, z=(0, 80), method="rl", stacks=True)
+    assert val.bar_metrics(res, case.phantom)["contrast"][4.38] > 0.10
