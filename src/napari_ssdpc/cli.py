@@ -107,19 +107,9 @@ SAVE_CHOICES = ("phase", "dpc", "stacks", "absorption", "delta_n")
 
 def _result_images(result, save):
     """{name: (array, axes, description)} of the requested outputs of one frame."""
-    out = {"ri": (result.ri, "ZYX", "refractive index")}
-    if "delta_n" in save:
-        out["delta_n"] = (result.delta_n, "ZYX", "refractive-index difference to the medium")
-    if "phase" in save:
-        out["phase"] = (result.phase, "ZYX", "phase per slab, rad")
-    if "absorption" in save:
-        out["absorption"] = (result.absorption, "ZYX", "absorption mu per slab")
-    if "dpc" in save:
-        out["dpc"] = (np.stack([result.dpc["ud"], result.dpc["lr"]]), "CZYX", "DPC up-down, left-right")
-    if "stacks" in save:
-        out["stacks"] = (np.stack([result.stacks[h] for h in ("up", "down", "left", "right")]), "CZYX",
-                         "RL intensity stacks up, down, left, right")
-    return out
+    from .core.series import result_images
+
+    return result_images(result, save)
 
 
 def _output_paths(out: Path, names):
@@ -131,8 +121,8 @@ def _output_paths(out: Path, names):
 def cmd_reconstruct(args):
     from .core.io import read_frame, write_ome_tiff
     from .core.lenslets import Calibration
-    from .core.pipeline import Reconstructor
     from .core.progress import tqdm_callback
+    from .core.series import FrameSource, Recipe
 
     out = _check_output(args.output)
     is_zarr = out.suffix == ".zarr"
@@ -142,26 +132,32 @@ def cmd_reconstruct(args):
     bad = [s for s in save if s not in SAVE_CHOICES]
     if bad:
         raise SsdpcError(f"--save {','.join(bad)}: unknown output; choose from {','.join(SAVE_CHOICES)}")
+    distributed = args.workers is not None or args.scheduler is not None
+    if distributed and not is_zarr:
+        raise SsdpcError("--workers/--scheduler spread the frames of a time series; write it to OME-Zarr (-o OUT.zarr)")
     cal = Calibration.from_json(args.calibration)
     optics = cal.optics if args.optics is None else _optics(args.optics)
-    raw = read_frame(args.raw)
-    flat = read_frame(args.flat, allow_series=False) if args.flat else None
-    frames = raw[None] if raw.ndim == 2 else raw
-    if len(frames) > 1 and not is_zarr:
+    source = FrameSource(args.raw) if is_zarr else None        # a series streams, frame by frame
+    frames = None if is_zarr else read_frame(args.raw)
+    if frames is not None and frames.ndim == 3 and len(frames) > 1:
         raise SsdpcError(f"{args.raw} holds {len(frames)} frames; write a time series to OME-Zarr (-o OUT.zarr)")
-    z = args.z if args.z is not None else None
-    with tqdm_callback("building operators", unit="plane") as cb:
-        rec = Reconstructor(optics, cal, z=z, dz=args.dz, iterations=args.iterations, alpha=args.alpha,
-                            model=args.model, method=args.method, flat=flat,
-                            stacks=bool({"dpc", "stacks", "absorption"} & set(save)),
-                            progress=lambda i, n, label="": cb(i, n))
-    meta = {"software": f"napari-ssdpc {__version__}", "settings": rec.settings(), "optics": optics.to_dict(),
+    flat = read_frame(args.flat, allow_series=False) if args.flat else None
+    recipe = Recipe(optics, cal, dict(z=args.z, dz=args.dz, iterations=args.iterations, alpha=args.alpha,
+                                      model=args.model, method=args.method, device=args.device,
+                                      stacks=bool({"dpc", "stacks", "absorption"} & set(save))), flat)
+    meta = {"software": f"napari-ssdpc {__version__}", "optics": optics.to_dict(),
             "calibration": {k: v for k, v in cal.to_dict().items() if k != "lenslets"}}
+    rec = None
+    if not distributed:
+        with tqdm_callback("building operators", unit="plane") as cb:
+            rec = recipe.build(progress=lambda i, n, label="": cb(i, n))
+        meta["settings"] = rec.settings()
     if is_zarr:
-        _reconstruct_series(frames, rec, out, save, meta)
+        _reconstruct_series(source, recipe, rec, out, save, meta, args)
         return
+    frame = frames if frames.ndim == 2 else frames[0]
     with tqdm_callback("reconstructing", unit="iteration") as cb:
-        result = rec.reconstruct(frames[0], progress=lambda i, n, label="": cb(i, n))
+        result = rec.reconstruct(frame, progress=lambda i, n, label="": cb(i, n))
     images = _result_images(result, save)
     paths = _output_paths(out, images)
     for name, (data, axes, what) in images.items():
@@ -171,28 +167,33 @@ def cmd_reconstruct(args):
     _print_summary(result)
 
 
-def _reconstruct_series(frames, rec, out, save, meta):
-    """Frame by frame into (t, z, y, x) OME-Zarr images, one chunk per frame."""
-    from tqdm.auto import tqdm
+def _reconstruct_series(source, recipe, rec, out, save, meta, args):
+    """Frames streamed into (t, z, y, x) OME-Zarr images, one chunk per frame; resumable; on a
+    Dask cluster with --workers/--scheduler (core/series.py)."""
+    from .core.series import reconstruct_series
 
-    from .core.io import create_ome_zarr
-
-    arrays = {}
-    for t, frame in enumerate(tqdm(frames, desc="frames", unit="frame", file=sys.stderr)):
-        result = rec.reconstruct(np.asarray(frame))
-        for name, (data, axes, what) in _result_images(result, save).items():
-            if name not in arrays:
-                arrays[name] = create_ome_zarr(out, name, (len(frames),) + data.shape, "T" + axes,
-                                               result.voxel_um, attrs={**meta, "quantity": what},
-                                               overwrite=True)
-            arrays[name][t] = data
-    print(f"wrote {out} ({len(frames)} frames: {', '.join(arrays)})")
+    report = reconstruct_series(source, out, recipe, save=save, meta=meta, workers=args.workers,
+                                scheduler=args.scheduler, rec=rec)
+    names = ", ".join(["ri"] + [s for s in SAVE_CHOICES if s in save])
+    if report.written == 0:
+        print(f"{out}: all {report.frames} frames were already written ({names})")
+        return
+    print(f"wrote {out} ({report.written} of {report.frames} frames, {report.skipped} done before: {names}; "
+          f"{report.frames_per_second:.2f} frames/s)")
 
 
 def _print_summary(result):
     dn = result.delta_n
     print(f"volume {dn.shape} (z, y, x), voxel {result.voxel_um[0]:g} x {result.voxel_um[1]:.4f} x "
           f"{result.voxel_um[2]:.4f} µm; delta n from {dn.min():+.4f} to {dn.max():+.4f}")
+
+
+def cmd_bench(args):
+    from .core.bench import format_report, run_bench
+
+    report = run_bench(quick=args.quick, device=args.device, cache_dir=args.cache, reference=not args.no_reference,
+                       log=None if args.json else (lambda m: print(m, file=sys.stderr, flush=True)))
+    print(json.dumps(report, indent=2) if args.json else format_report(report))
 
 
 def cmd_demo(args):
@@ -245,8 +246,21 @@ def build_parser():
     s.add_argument("--model", choices=("lenslet", "paper"), help="transfer-function model (default lenslet)")
     s.add_argument("--method", choices=("wotf", "rl"), help="phase method (default wotf, see docs/validation.md)")
     s.add_argument("--save", help=f"extra outputs, comma separated: {','.join(SAVE_CHOICES)}")
-    s.add_argument("-o", "--output", required=True, help="OUT.ome.tif (one frame) or OUT.zarr (time series)")
+    s.add_argument("-o", "--output", required=True, help="OUT.ome.tif (one frame) or OUT.zarr (time series; "
+                   "a rerun resumes it)")
+    s.add_argument("--device", choices=("cpu", "gpu"), default="cpu",
+                   help="where Richardson-Lucy runs: cpu (NumPy, default) or gpu (CuPy, pip install napari-ssdpc[gpu])")
+    s.add_argument("--workers", type=int, help="spread the frames of a series over a local Dask cluster of N workers")
+    s.add_argument("--scheduler", help="spread the frames over an existing Dask cluster (tcp://host:8786)")
     s.set_defaults(func=cmd_reconstruct)
+
+    s = sub.add_parser("bench", help="time the reconstruction (fast path vs reference path, memory, frames/s)")
+    s.add_argument("--quick", action="store_true", help="a small case (fewer planes and iterations) in about a minute")
+    s.add_argument("--json", action="store_true", help="print JSON instead of tables")
+    s.add_argument("--device", choices=("cpu", "gpu"), default="cpu", help="device of the fast path")
+    s.add_argument("--cache", help="folder for the simulated frames (default ~/.cache/napari-ssdpc/bench)")
+    s.add_argument("--no-reference", action="store_true", help="skip the reference path")
+    s.set_defaults(func=cmd_bench)
 
     s = sub.add_parser("demo", help="simulate the paper's PMMA bead and process it end to end")
     s.add_argument("-o", "--output", default="ssdpc-demo", help="output folder (default ./ssdpc-demo)")

@@ -26,33 +26,48 @@ from .optics import Optics
 
 
 class WotfInversion:
-    """Operators built once per optics, lenslet set, view grid and z grid."""
+    """Operators built once per optics, lenslet set, view grid and z grid.
 
-    def __init__(self, optics: Optics, lenslets, shape, pixel_um, z_um, alpha: float, i0=None, progress=None):
+    The WOTFs vanish beyond |u| = 2ρ (the sub-aperture's autocorrelation), where the solution
+    is zero: the operators are kept, and the solve done, on that band of the spectrum only, and
+    built a few planes at a time (docs/performance.md)."""
+
+    def __init__(self, optics: Optics, lenslets, shape, pixel_um, z_um, alpha: float, i0=None, progress=None,
+                 chunk: int = 16):
         if not alpha > 0:
             raise SsdpcError(f"alpha must be > 0, got {alpha}")
         z_um = np.atleast_1d(np.asarray(z_um, float))
-        _, h_phase, i0_model = transfer.lenslet_transfer_functions(optics, lenslets, shape, pixel_um, z_um=z_um)
+        setup = transfer._LensletSetup(optics, lenslets, shape, pixel_um)
+        i0_model = setup.i0
         i0 = np.asarray(i0_model if i0 is None else i0, float)
         if np.any(i0_model <= 0):
             raise SsdpcError("a view without direct light cannot be inverted; leave dark-field lenslets out")
         self.w = np.sqrt(i0 / i0.max()).astype(np.float32)                           # sqrt of the noise weights
-        hw = (h_phase * (self.w / i0_model)[:, None, None, None]).astype(np.complex64)  # (K, Z, ny, nx)
-        del h_phase
-        gram = np.einsum("kzyx,lzyx->yxkl", hw, np.conj(hw))                         # (ny, nx, K, K)
+        self.shape = tuple(int(n) for n in shape)
+        self._iy, self._ix = ((transfer._fft_indices(m) % n)[:, None] for m, n in zip(setup.m_out, self.shape))
+        self._ix = self._ix.T
+        k, nz = len(i0), len(z_um)
+        self.hw_conj = np.empty((k, nz) + tuple(setup.m_out), np.complex64)         # (K, Z, band)
+        gram = 0
+        weight = (self.w / i0_model)[:, None, None, None].astype(np.float32)
+        for start in range(0, nz, chunk):
+            _, h_phase = setup.band(z_um[start:start + chunk])                        # (z, K, band)
+            hw = (np.swapaxes(h_phase, 0, 1) * weight).astype(np.complex64)
+            gram = gram + np.einsum("kzyx,lzyx->yxkl", hw, np.conj(hw))               # (band, K, K)
+            self.hw_conj[:, start:start + chunk] = np.conj(hw)
         scale = float(np.max(np.real(np.einsum("yxkk->yx", gram)))) / len(i0)
         self.alpha = float(alpha)
         self.alpha_abs = self.alpha * scale      # alpha is relative to the strongest view's |H|² summed over z
         eye = np.eye(len(i0), dtype=np.complex64)
         self.inv = np.linalg.inv(gram + self.alpha_abs * eye).astype(np.complex64)
-        self.hw_conj = np.conj(hw)
         if progress is not None:
             progress(1, 1)
 
     def phase(self, contrast) -> np.ndarray:
         """(Z, ny, nx) phase per slab from the views' contrast (K, ny, nx)."""
         c = np.asarray(contrast, np.float32) * self.w[:, None, None]
-        spec = sfft.fft2(c, workers=-1)                                               # (K, ny, nx)
+        spec = sfft.fft2(c, workers=-1)[:, self._iy, self._ix]                        # (K, band)
         lam = np.einsum("yxkl,lyx->kyx", self.inv, spec)
-        phi = np.einsum("kzyx,kyx->zyx", self.hw_conj, lam)
+        phi = np.zeros((self.hw_conj.shape[1],) + self.shape, np.complex64)           # zero beyond the band
+        phi[:, self._iy, self._ix] = np.einsum("kzyx,kyx->zyx", self.hw_conj, lam)
         return sfft.ifft2(phi, workers=-1).real.astype(np.float32)

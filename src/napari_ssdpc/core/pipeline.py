@@ -31,7 +31,8 @@ import numpy as np
 import scipy.fft as sfft
 
 from . import transfer
-from .deconvolution import MultiViewRL
+from .backend import get_backend
+from .deconvolution import Band, MultiViewRL
 from .dpc import dpc_image, phase_to_delta_n, tikhonov_phase
 from .errors import SsdpcError, SsdpcWarning
 from .lenslets import Calibration, extract_views
@@ -101,8 +102,9 @@ class Reconstructor:
 
     def __init__(self, optics: Optics, calibration: Calibration, *, z=None, dz=None, iterations=None,
                  alpha=None, model=None, method=None, flat=None, dark=None, stacks: bool = True,
-                 min_light: float = 0.05, progress=None):
+                 min_light: float = 0.05, progress=None, device="cpu"):
         rec = optics.reconstruction
+        self.backend = get_backend(device)   # 'cpu' (NumPy) or 'gpu' (CuPy): where Richardson-Lucy runs
         self.optics = optics
         self.calibration = calibration
         z_min, z_max = (rec["z_min_um"], rec["z_max_um"]) if z is None else z
@@ -193,13 +195,21 @@ class Reconstructor:
         shift = float(np.abs(self.psf.tilt).max() * np.max(np.abs(self.z_um))) / self.pixel_um  # parallax, px
         n = [sfft.next_fast_len(int(s + self.psf.support_px + 2 * math.ceil(shift)), real=True) for s in shape]
         self.fft_shape = tuple(n)
-        otf = np.empty((len(self.lenslets), len(self.z_um), n[0], n[1] // 2 + 1), np.complex64)
+        # the OTFs vanish outside |f| ≤ 2ρ (autocorrelation of the sub-aperture): keep that band
+        # (+2 frequency steps for the soft pupil edge); what lies outside is below 4e-4 of the DC
+        self.band = Band.disk(self.fft_shape, 2 * opt.subaperture_radius * self.pixel_um + 2.0 / min(n))
+        otf = {h: np.empty((len(m), len(self.z_um)) + self.band.box_shape, np.complex64)
+               for h, m in self.halves.items()}
         for i, z in enumerate(self.z_um):
-            otf[:, i] = self.psf.otf(float(z), self.fft_shape)
+            full = self.band.take(self.psf.otf(float(z), self.fft_shape))
+            for h, m in self.halves.items():
+                otf[h][:, i] = full[m]
             if progress is not None:
                 progress(i + 1, len(self.z_um), "PSF")
         self.psf.clear_cache()
-        self.rl = {h: MultiViewRL(otf[m], shape, self.view_mask[m]) for h, m in self.halves.items()}
+        shared = {}   # the halves run one after the other: they share their FFT scratch buffers
+        self.rl = {h: MultiViewRL(otf.pop(h), shape, self.view_mask[m], band=self.band, backend=self.backend,
+                                  workspace=shared) for h, m in self.halves.items()}
         # DPC transfer functions (in focus) of each axis, on the view grid
         if self.model == "lenslet":
             _, h_phase, i0 = transfer.lenslet_transfer_functions(opt, self.lenslets, shape, self.pixel_um)
@@ -241,19 +251,25 @@ class Reconstructor:
                 stacks[h], history[h] = res.stack, res.relative_change
                 if res.stopped:
                     raise Cancelled("reconstruction cancelled")
+        t_rl = time.perf_counter()
+        if self.with_stacks:
             dpc, absorption = self.dpc_from_stacks(stacks)
         t2 = time.perf_counter()
-        if self.method == "wotf":
-            phase = self.wotf.phase(np.where(self.view_mask, views - 1.0, 0.0)) * self.mask
-        else:
-            phase = tikhonov_phase([dpc["ud"], dpc["lr"]], [self.h_dpc["ud"], self.h_dpc["lr"]], self.alpha) * self.mask
+        phase = self.phase_from(views, dpc)
         dn = phase_to_delta_n(phase, self.optics.wavelength_um, self.dz)
         t3 = time.perf_counter()
         return Result(ri=(self.optics.medium_index + dn).astype(np.float32), delta_n=dn,
                       phase=phase.astype(np.float32), absorption=absorption, dpc=dpc, stacks=stacks,
                       z_um=self.z_um.copy(), y_um=self.y_um.copy(), x_um=self.x_um.copy(), convergence=history,
-                      timings={"preprocess_s": t1 - t0, "rl_s": t2 - t1, "phase_s": t3 - t2},
+                      timings={"preprocess_s": t1 - t0, "rl_s": t_rl - t1, "dpc_s": t2 - t_rl, "phase_s": t3 - t2},
                       settings=self.settings())
+
+    def phase_from(self, views, dpc) -> np.ndarray:
+        """Phase per slab (Z, ny, nx) by the chosen method, from the preprocessed views ('wotf')
+        or the DPC stacks ('rl')."""
+        if self.method == "wotf":
+            return self.wotf.phase(np.where(self.view_mask, views - 1.0, 0.0)) * self.mask
+        return tikhonov_phase([dpc["ud"], dpc["lr"]], [self.h_dpc["ud"], self.h_dpc["lr"]], self.alpha) * self.mask
 
     def dpc_from_stacks(self, stacks):
         """DPC stacks (Eq. 1), each slice normalised by the pair's z-summed intensity, and the

@@ -1,0 +1,131 @@
+"""Array backend: NumPy by default, CuPy on request; banded Richardson-Lucy operators.
+
+GPU tests run only where CuPy sees a CUDA GPU; everything else is checked with NumPy."""
+
+import types
+
+import numpy as np
+import pytest
+
+from napari_ssdpc.core import backend
+from napari_ssdpc.core.backend import get_backend, gpu_available
+from napari_ssdpc.core.deconvolution import Band, MultiViewRL
+from napari_ssdpc.core.errors import SsdpcError
+from napari_ssdpc.core.optics import Optics
+from napari_ssdpc.core.pipeline import Reconstructor
+
+needs_gpu = pytest.mark.skipif(not gpu_available(), reason="needs CuPy and a CUDA GPU")
+
+
+def test_cpu_backend_is_numpy_and_scipy_fft():
+    bk = get_backend("cpu")
+    assert bk.xp is np and not bk.is_gpu and get_backend(bk) is bk and get_backend(None).device == "cpu"
+    a = np.random.default_rng(0).random((3, 20, 18)).astype(np.float32)
+    assert isinstance(bk.asarray(a), np.ndarray) and bk.to_host(a) is a
+    np.testing.assert_allclose(bk.irfft2(bk.rfft2(a), s=a.shape[-2:]), a, atol=1e-6)
+    # the split transforms (rfft along x, fft along y) make the same spectrum as rfft2
+    np.testing.assert_allclose(bk.fft_(bk.rfft(a), axis=-2), bk.rfft2(a), atol=1e-4)
+
+
+def test_unknown_device_is_a_one_line_error():
+    with pytest.raises(SsdpcError, match="unknown device 'tpu'; use one of cpu, gpu"):
+        get_backend("tpu")
+
+
+def test_gpu_without_cupy_names_the_install(monkeypatch):
+    def no_cupy(name):
+        raise ImportError(name)
+
+    monkeypatch.setattr(backend, "_import", no_cupy)
+    with pytest.raises(SsdpcError, match=r"needs CuPy.*napari-ssdpc\[gpu\].*--device cpu") as e:
+        get_backend("gpu")
+    assert "\n" not in str(e.value)
+    assert not gpu_available()
+    # the Reconstructor asks for its backend first: no operators are built for nothing
+    with pytest.raises(SsdpcError, match="needs CuPy"):
+        Reconstructor(Optics.paper(), None, device="gpu")
+
+
+def test_gpu_with_cupy_but_no_device(monkeypatch):
+    def runtime_error():
+        raise RuntimeError("cudaErrorNoDevice")
+
+    runtime = types.SimpleNamespace(getDeviceCount=runtime_error)
+    fake = types.SimpleNamespace(cuda=types.SimpleNamespace(runtime=runtime))
+    monkeypatch.setattr(backend, "_import", lambda name: fake)
+    with pytest.raises(SsdpcError, match="found no CUDA GPU"):
+        get_backend("gpu")
+
+
+# ------------------------------------------------------------------ banded RL
+def _band_limited_otfs(shape=(64, 60), k=3, z=4, radius=0.2, seed=0):
+    """OTFs of random real kernels with everything outside the band set to zero."""
+    rng = np.random.default_rng(seed)
+    kernels = rng.random((k, z) + shape).astype(np.float32)
+    otf = np.fft.rfft2(kernels).astype(np.complex64)
+    band = Band.disk(shape, radius)
+    keep = np.zeros(otf.shape[-2:], bool)
+    band.put(keep, np.ones(band.box_shape, bool))
+    return otf * keep, band
+
+
+def test_band_take_and_put_are_inverse():
+    band = Band.disk((64, 60), 0.2)
+    assert band.box_shape == (2 * 12 + 1, 13) and 0 < band.fraction < 0.25
+    spec = np.arange(64 * 31).reshape(64, 31).astype(np.complex64)
+    out = np.zeros_like(spec)
+    band.put(out, band.take(spec))
+    f = np.fft.fftfreq(64)
+    rows = np.abs(f) <= 12 / 64
+    assert np.array_equal(out[rows, :13], spec[rows, :13]) and not out[~rows].any() and not out[:, 13:].any()
+    assert Band.disk((64, 60), 0.6).is_full
+
+
+def test_banded_operators_equal_the_full_spectrum_ones():
+    otf, band = _band_limited_otfs()
+    view = (40, 36)
+    rng = np.random.default_rng(1)
+    mask = rng.random(view) > 0.1
+    full = MultiViewRL(otf, view, mask)
+    banded = MultiViewRL(band.take(otf), view, mask, band=band, backend="cpu")
+    assert banded.fft_shape == full.fft_shape == (64, 60)
+    o = rng.random((4, 64, 60)).astype(np.float32)
+    r = rng.random((3, 64, 60)).astype(np.float32)
+    np.testing.assert_allclose(banded.forward(o), full.forward(o), rtol=0, atol=1e-4 * np.abs(full.forward(o)).max())
+    np.testing.assert_allclose(banded.adjoint(r), full.adjoint(r), rtol=0, atol=1e-4 * np.abs(full.adjoint(r)).max())
+    # adjoint pair on the band, too
+    assert np.vdot(banded.forward(o), r) == pytest.approx(np.vdot(o, banded.adjoint(r)), rel=1e-4)
+    views = np.clip(full.forward(rng.random((4, 64, 60)).astype(np.float32))[:, :40, :36], 0, None)
+    a, b = full.run(views, 5), banded.run(views, 5)
+    assert np.max(np.abs(a.stack - b.stack)) <= 1e-4 * np.abs(a.stack).max()
+    assert a.relative_change == pytest.approx(b.relative_change, rel=1e-3)
+
+
+def test_odd_fft_width_keeps_its_shape():
+    """A band carries the true FFT shape, so an odd width (next_fast_len may give one) is kept."""
+    otf, band = _band_limited_otfs(shape=(48, 45), k=2, z=3)
+    rl = MultiViewRL(band.take(otf), (30, 30), band=band)
+    assert rl.fft_shape == (48, 45) and rl.forward(np.ones((3, 48, 45), np.float32)).shape == (2, 48, 45)
+
+
+@needs_gpu
+def test_gpu_operators_match_the_cpu():
+    otf, band = _band_limited_otfs()
+    rng = np.random.default_rng(2)
+    views = rng.random((3, 40, 36)).astype(np.float32)
+    cpu = MultiViewRL(band.take(otf), (40, 36), band=band, backend="cpu").run(views, 5)
+    gpu = MultiViewRL(band.take(otf), (40, 36), band=band, backend="gpu").run(views, 5)
+    assert isinstance(gpu.stack, np.ndarray)
+    assert np.max(np.abs(gpu.stack - cpu.stack)) <= 1e-4 * np.abs(cpu.stack).max()
+
+
+def test_operators_pickle_without_their_scratch_buffers():
+    import pickle
+
+    otf, band = _band_limited_otfs()
+    rl = MultiViewRL(band.take(otf), (40, 36), band=band, workspace={})
+    views = np.random.default_rng(3).random((3, 40, 36)).astype(np.float32)
+    before = rl.run(views, 3).stack
+    copy = pickle.loads(pickle.dumps(rl))
+    assert copy.bk.device == "cpu" and pickle.loads(pickle.dumps(get_backend("cpu"))).xp is np
+    np.testing.assert_array_equal(copy.run(views, 3).stack, before)

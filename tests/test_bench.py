@@ -1,0 +1,118 @@
+"""Benchmark machinery: the reference path computes what the fast path computes; the report.
+
+No test here times anything (benchmarks print ratios, DESIGN.md §6)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from napari_ssdpc.cli import main
+from napari_ssdpc.core.bench import format_report, run_bench
+from napari_ssdpc.core.pipeline import Reconstructor
+from napari_ssdpc.core.reference import layout, max_relative_difference, reconstruct_reference
+from napari_ssdpc.validation import Case
+
+
+def _synthetic(basetemp):
+    """White/flat frames, calibration and frames (the flat frame with smooth random modulations),
+    cached for the whole test session (the same cache as tests/test_series.py)."""
+    from scipy import ndimage
+
+    from napari_ssdpc.core import simulate as sim
+    from napari_ssdpc.core.grid import Grid
+    from napari_ssdpc.core.lenslets import calibrate
+    from napari_ssdpc.core.optics import Optics
+
+    optics = Optics.paper()
+    path = basetemp / "ssdpc-synthetic.npz"
+    if not path.is_file():
+        grid = Grid.nominal(optics, axis_offset_px=(3.7, -2.2), rotation_deg=0.4)
+        rng = np.random.default_rng(0)
+        white = sim.white_frame(optics, grid=grid, rng=rng)
+        flat = sim.flat_frame(optics, grid=grid, rng=rng)
+        frames = []
+        for t in range(12):
+            field = ndimage.zoom(rng.standard_normal((64, 77)), (2048 / 64, 2448 / 77), order=1)
+            frames.append(np.clip(flat * (1 + 0.05 * field), 0, 4095).astype(np.uint16))
+        np.savez(path, white=white, flat=flat, frames=np.stack(frames))
+    d = np.load(path)
+    return optics, calibrate(d["white"], optics), d["flat"], d["frames"], d["white"]
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    return _synthetic(tmp_path_factory.getbasetemp())
+
+
+def _check_equal(rec, frame, canvas):
+    fast = rec.reconstruct(frame)
+    ref = reconstruct_reference(rec, frame, canvas=canvas)
+    for h, stack in fast.stacks.items():
+        assert np.ptp(stack) > 0.05 * np.abs(stack).max()          # a real image, not a constant
+        assert max_relative_difference(stack, ref.stacks[h]) < 1e-3
+    assert max_relative_difference(fast.delta_n, ref.delta_n) < 1e-3
+    return ref
+
+
+def test_reference_path_equals_fast_path_on_the_ei_box(data):
+    optics, cal, flat, frames, _ = data
+    rec = Reconstructor(optics, cal, z=(-40, 40), dz=10, iterations=4, flat=flat, method="rl")
+    ref = _check_equal(rec, frames[0], "eis")
+    assert ref.layout.area_ratio > 4            # four 2x2-spread windows and their margins
+
+
+def test_reference_path_on_the_whole_sensor(data):
+    optics, cal, flat, frames, _ = data
+    rec = Reconstructor(optics, cal, z=(-20, 20), dz=20, iterations=2, flat=flat, method="rl")
+    ref = _check_equal(rec, frames[1], "sensor")
+    assert ref.layout.shape == tuple(cal.frame_shape)
+
+
+def test_spread_layout_keeps_every_kernel_and_separates_the_eis(data):
+    optics, cal, flat, _, _ = data
+    rec = Reconstructor(optics, cal, z=(-80, 80), dz=40, iterations=1, flat=flat, method="rl")
+    lay = layout(rec, "eis")
+    shift = np.abs(rec.psf.tilt).max() * 80 / rec.pixel_um
+    assert min(lay.reach) >= rec.psf.support_px // 2 + shift      # the crop keeps the kernel support
+    # light of one lenslet, from anywhere in the object domain, never reaches another lenslet's view
+    import scipy.fft as sfft
+
+    from napari_ssdpc.core.reference import _kernels, full_frame_psf
+
+    kernels = np.abs(_kernels(rec, 80.0, lay))
+    ones = np.ones(lay.fft_shape, np.float32)
+    for k in range(len(rec.lenslets)):
+        psf = full_frame_psf(kernels, [k], lay)
+        img = sfft.irfft2(sfft.rfft2(ones, s=lay.shape) * sfft.rfft2(psf), s=lay.shape)
+        assert img[lay.windows(k)].min() > 0.5 * img.max()
+        for other in range(len(rec.lenslets)):
+            if other != k:
+                assert np.abs(img[lay.windows(other)]).max() < 1e-5 * img.max()
+    obj = np.random.default_rng(0).random((2,) + lay.fft_shape)
+    np.testing.assert_array_equal(lay.to_circular(lay.to_linear(obj)), obj)
+
+
+def test_quick_bench_report(data):
+    optics, cal, flat, frames, white = data
+    case = Case("synthetic", optics, None, frames[0], flat, white, None)
+    report = run_bench(quick=True, case=case, reference=False, high_na_case=False)
+    st = report["stages"]
+    assert set(st) == {"fast", "wotf", "series"}
+    assert report["case"]["planes"] == 11 and report["case"]["iterations"] == 3
+    assert st["fast"]["lit_lenslets"] == 4 and 0 < st["fast"]["band_fraction"] < 0.3
+    assert st["series"]["frames"] == 3
+    assert report["machine"]["cores"] >= 1 and report["targets"]["peak_memory_gb"] > 0
+    json.dumps(report)                                            # JSON-able for --json
+    text = format_report(report)
+    assert "| fast, NA 0.1 (standard) | 11 | 4 |" in text and "serial, OME-Zarr" in text
+
+
+@pytest.mark.slow
+def test_cli_bench_quick_json(tmp_path, capsys):
+    """`ssdpc bench --quick --json` end to end (simulates the PMMA bead once, about a minute)."""
+    assert main(["bench", "--quick", "--json", "--cache", str(tmp_path)]) == 0
+    report = json.loads(capsys.readouterr().out)
+    t = report["targets"]
+    assert t["max_rel_diff"] < 1e-3 and t["peak_memory_ok"]
+    assert report["stages"]["reference_sensor"]["canvas"] == [2048, 2448]

@@ -1,0 +1,201 @@
+"""Time series: streamed frames, (t, z, y, x) OME-Zarr, resume after a kill, Dask workers."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+import tracemalloc
+
+import numpy as np
+import pytest
+import tifffile
+
+from napari_ssdpc.cli import main
+from napari_ssdpc.core.backend import gpu_available
+from napari_ssdpc.core.errors import SsdpcError
+from napari_ssdpc.core.io import read_ome_zarr
+from napari_ssdpc.core.series import FrameSource, Recipe, _PagedSeries, done_frames, reconstruct_series
+
+SETTINGS = dict(z=(-20.0, 20.0), dz=10.0, iterations=2, method="rl", stacks=True)
+CLI = ["--z", "-20", "20", "--dz", "10", "--iterations", "2", "--method", "rl"]
+
+
+def _synthetic(basetemp):
+    """White/flat frames, calibration and a short series (the flat frame with smooth random
+    modulations), cached for the whole test session."""
+    from scipy import ndimage
+
+    from napari_ssdpc.core import simulate as sim
+    from napari_ssdpc.core.grid import Grid
+    from napari_ssdpc.core.lenslets import calibrate
+    from napari_ssdpc.core.optics import Optics
+
+    optics = Optics.paper()
+    path = basetemp / "ssdpc-synthetic.npz"
+    if not path.is_file():
+        grid = Grid.nominal(optics, axis_offset_px=(3.7, -2.2), rotation_deg=0.4)
+        rng = np.random.default_rng(0)
+        white = sim.white_frame(optics, grid=grid, rng=rng)
+        flat = sim.flat_frame(optics, grid=grid, rng=rng)
+        frames = []
+        for t in range(12):
+            field = ndimage.zoom(rng.standard_normal((64, 77)), (2048 / 64, 2448 / 77), order=1)
+            frames.append(np.clip(flat * (1 + 0.05 * field), 0, 4095).astype(np.uint16))
+        np.savez(path, white=white, flat=flat, frames=np.stack(frames))
+    d = np.load(path)
+    return optics, calibrate(d["white"], optics), d["flat"], d["frames"]
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    return _synthetic(tmp_path_factory.getbasetemp())
+
+
+@pytest.fixture(scope="module")
+def files(data, tmp_path_factory):
+    optics, cal, flat, frames = data
+    d = tmp_path_factory.mktemp("series")
+    tifffile.imwrite(d / "series.tif", frames[:6], photometric="minisblack")
+    tifffile.imwrite(d / "flat.tif", flat)
+    cal.to_json(d / "cal.json")
+    return d
+
+
+@pytest.fixture(scope="module")
+def recipe(data):
+    optics, cal, flat, _ = data
+    return Recipe(optics, cal, dict(SETTINGS), flat)
+
+
+@pytest.fixture(scope="module")
+def rec(recipe):
+    return recipe.build()
+
+
+@pytest.fixture(scope="module")
+def serial(files, tmp_path_factory):
+    """The uninterrupted serial run of the CLI, the reference for the other runs."""
+    out = tmp_path_factory.mktemp("serial") / "out.zarr"
+    assert main(_args(files, out) + ["--save", "phase,dpc"]) == 0
+    return out
+
+
+def _args(files, out):
+    return ["reconstruct", str(files / "series.tif"), "--calibration", str(files / "cal.json"),
+            "--flat", str(files / "flat.tif")] + CLI + ["-o", str(out)]
+
+
+def _arrays(out, names=("ri", "phase", "dpc")):
+    return {n: read_ome_zarr(out, n)[0][:] for n in names}
+
+
+def test_series_store_holds_every_frame_as_reconstructed_alone(serial, data, rec):
+    _, _, _, frames = data
+    ri, voxel, attrs = read_ome_zarr(serial, "ri")
+    assert ri.shape == (6, 5) + rec.mask.shape and ri.chunks == (1, 5) + rec.mask.shape   # one chunk per frame
+    assert voxel == pytest.approx((10.0, rec.pixel_um, rec.pixel_um))
+    assert attrs["settings"]["rl_iterations"] == 2 and attrs["quantity"] == "refractive index"
+    assert list(done_frames(serial)) == list(range(6))
+    for t in (0, 5):
+        res = rec.reconstruct(frames[t])
+        np.testing.assert_array_equal(ri[t], res.ri)
+        np.testing.assert_array_equal(read_ome_zarr(serial, "dpc")[0][t], np.stack([res.dpc["ud"], res.dpc["lr"]]))
+
+
+def test_rerun_skips_finished_frames_and_refuses_other_settings(serial, files, capsys):
+    before = {p: p.stat().st_mtime_ns for p in (serial / "ri" / "0").iterdir()}
+    capsys.readouterr()
+    assert main(_args(files, serial) + ["--save", "phase,dpc"]) == 0
+    assert "all 6 frames were already written" in capsys.readouterr().out
+    assert {p: p.stat().st_mtime_ns for p in (serial / "ri" / "0").iterdir()} == before
+    assert main(_args(files, serial) + ["--save", "phase,dpc", "--iterations", "3"]) == 2
+    err = capsys.readouterr().err
+    assert "other settings" in err and err.count("\n") == 1
+
+
+def test_frames_are_streamed_not_loaded(data, recipe, rec, tmp_path):
+    """Memory does not grow with the series length: 12 frames peak no higher than 2 frames
+    (plus less than one frame), from a memory map or from compressed pages."""
+    _, _, _, frames = data
+    plain, packed = tmp_path / "plain.tif", tmp_path / "packed.tif"
+    tifffile.imwrite(plain, frames, photometric="minisblack")
+    tifffile.imwrite(packed, frames, photometric="minisblack", compression="zlib")
+    assert isinstance(FrameSource(plain)._open(), np.memmap)
+    assert isinstance(FrameSource(packed)._open(), _PagedSeries)
+    np.testing.assert_array_equal(FrameSource(packed)[7], frames[7])
+    peaks = {}
+    for n in (2, 12):
+        tracemalloc.start()
+        reconstruct_series(packed, tmp_path / f"out{n}.zarr", recipe, rec=rec, progress=False, stop_after=n)
+        peaks[n] = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+    assert list(done_frames(tmp_path / "out2.zarr")) == [0, 1]
+    assert peaks[12] - peaks[2] < frames[0].nbytes, peaks
+
+
+def test_killed_run_leaves_a_readable_store_and_resumes(serial, files, tmp_path):
+    out = tmp_path / "killed.zarr"
+    cmd = [sys.executable, "-c", "import sys; from napari_ssdpc.cli import main; sys.exit(main(sys.argv[1:]))"]
+    proc = subprocess.Popen(cmd + _args(files, out) + ["--save", "phase,dpc"], stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 300
+        while time.monotonic() < deadline and proc.poll() is None:
+            if (out / "ssdpc_done").is_dir() and len(done_frames(out)) >= 1:
+                break
+            time.sleep(0.02)
+        os.kill(proc.pid, signal.SIGKILL)           # no clean-up at all
+    finally:
+        proc.wait()
+    done = list(done_frames(out))
+    assert 1 <= len(done) < 6, "the run was not interrupted mid-way"
+    ref = _arrays(serial)
+    got = _arrays(out)                              # every chunk reads: nothing is corrupt
+    for t in range(6):
+        for n in ref:
+            if t in done:
+                np.testing.assert_array_equal(got[n][t], ref[n][t])
+            else:                                   # not yet written (NaN) or written but not marked
+                assert np.all(np.isnan(got[n][t])) or np.array_equal(got[n][t], ref[n][t])
+    assert main(_args(files, out) + ["--save", "phase,dpc"]) == 0
+    assert list(done_frames(out)) == list(range(6))
+    assert not list(out.rglob("*.partial"))
+    for n, a in _arrays(out).items():
+        np.testing.assert_array_equal(a, ref[n])
+
+
+def test_dask_local_cluster_of_two_workers_equals_the_serial_run(serial, files, tmp_path):
+    pytest.importorskip("distributed")
+    out = tmp_path / "dask.zarr"
+    assert main(_args(files, out) + ["--save", "phase,dpc", "--workers", "2"]) == 0
+    assert list(done_frames(out)) == list(range(6))
+    ref = _arrays(serial)
+    for n, a in _arrays(out).items():
+        np.testing.assert_array_equal(a, ref[n])
+
+
+def test_series_bad_input(files, recipe, data, tmp_path, capsys):
+    _, _, _, frames = data
+    with pytest.raises(SsdpcError, match="frames of shape .* differ from the calibration"):
+        reconstruct_series(frames[:2, :-8], tmp_path / "a.zarr", recipe, progress=False)
+    with pytest.raises(SsdpcError, match="--workers must be >= 1"):
+        reconstruct_series(files / "series.tif", tmp_path / "b.zarr", recipe, workers=0)
+    with pytest.raises(SsdpcError, match="give the series as a TIFF path"):
+        reconstruct_series(frames[:2], tmp_path / "c.zarr", recipe, workers=2)
+    foreign = tmp_path / "foreign.zarr"
+    foreign.mkdir()
+    (foreign / "data.txt").write_text("not ours")
+    with pytest.raises(SsdpcError, match="not written by `ssdpc reconstruct`"):
+        reconstruct_series(frames[:1], foreign, recipe, progress=False)
+    capsys.readouterr()
+    assert main(_args(files, tmp_path / "one.ome.tif") + ["--workers", "2"]) == 2
+    err = capsys.readouterr().err
+    assert "write it to OME-Zarr" in err and err.count("\n") == 1
+    if not gpu_available():
+        assert main(_args(files, tmp_path / "gpu.zarr") + ["--device", "gpu"]) == 2
+        err = capsys.readouterr().err
+        assert "--device gpu" in err and err.count("\n") == 1 and not (tmp_path / "gpu.zarr").exists()
+    assert main(["reconstruct", str(tmp_path / "missing.tif"), "--calibration", str(files / "cal.json"),
+                 "-o", str(tmp_path / "m.zarr")]) == 2
+    assert "file not found" in capsys.readouterr().err
+    assert not (tmp_path / "m.zarr").exists()
