@@ -1,5 +1,6 @@
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -12,3 +13,26 @@ def shared_optics_path():
         if p.is_file():
             return p
     pytest.skip("paper-optics.yaml not found")
+
+
+@pytest.fixture(scope="session")
+def synthetic_series(tmp_path_factory):
+    """(optics, calibration, flat, frames, white): white/flat frames of the paper's optics and 12
+    frames of the flat frame with smooth random modulations, for the series and bench tests."""
+    from scipy import ndimage
+
+    from napari_ssdpc.core import simulate as sim
+    from napari_ssdpc.core.grid import Grid
+    from napari_ssdpc.core.lenslets import calibrate
+    from napari_ssdpc.core.optics import Optics
+
+    optics = Optics.paper()
+    grid = Grid.nominal(optics, axis_offset_px=(3.7, -2.2), rotation_deg=0.4)
+    rng = np.random.default_rng(0)
+    white = sim.white_frame(optics, grid=grid, rng=rng)
+    flat = sim.flat_frame(optics, grid=grid, rng=rng)
+    frames = []
+    for _ in range(12):
+        field = ndimage.zoom(rng.standard_normal((64, 77)), (2048 / 64, 2448 / 77), order=1)
+        frames.append(np.clip(flat * (1 + 0.05 * field), 0, 4095).astype(np.uint16))
+    return optics, calibrate(white, optics), flat, np.stack(frames), white

@@ -21,35 +21,9 @@ SETTINGS = dict(z=(-20.0, 20.0), dz=10.0, iterations=2, method="rl", stacks=True
 CLI = ["--z", "-20", "20", "--dz", "10", "--iterations", "2", "--method", "rl"]
 
 
-def _synthetic(basetemp):
-    """White/flat frames, calibration and a short series (the flat frame with smooth random
-    modulations), cached for the whole test session."""
-    from scipy import ndimage
-
-    from napari_ssdpc.core import simulate as sim
-    from napari_ssdpc.core.grid import Grid
-    from napari_ssdpc.core.lenslets import calibrate
-    from napari_ssdpc.core.optics import Optics
-
-    optics = Optics.paper()
-    path = basetemp / "ssdpc-synthetic.npz"
-    if not path.is_file():
-        grid = Grid.nominal(optics, axis_offset_px=(3.7, -2.2), rotation_deg=0.4)
-        rng = np.random.default_rng(0)
-        white = sim.white_frame(optics, grid=grid, rng=rng)
-        flat = sim.flat_frame(optics, grid=grid, rng=rng)
-        frames = []
-        for t in range(12):
-            field = ndimage.zoom(rng.standard_normal((64, 77)), (2048 / 64, 2448 / 77), order=1)
-            frames.append(np.clip(flat * (1 + 0.05 * field), 0, 4095).astype(np.uint16))
-        np.savez(path, white=white, flat=flat, frames=np.stack(frames))
-    d = np.load(path)
-    return optics, calibrate(d["white"], optics), d["flat"], d["frames"]
-
-
 @pytest.fixture(scope="module")
-def data(tmp_path_factory):
-    return _synthetic(tmp_path_factory.getbasetemp())
+def data(synthetic_series):
+    return synthetic_series[:4]
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,9 @@ from tqdm.auto import tqdm
 @contextlib.contextmanager
 def tqdm_callback(desc: str, unit: str = "step"):
     """A ``progress(done, total)`` callable that drives a tqdm bar on stderr."""
-    bar = tqdm(desc=desc, unit=unit, file=sys.stderr, leave=False, dynamic_ncols=True, mininterval=0.5)
+    tty = sys.stderr.isatty()
+    # in a log file, a line every 10 s is enough
+    bar = tqdm(desc=desc, unit=unit, file=sys.stderr, leave=False, dynamic_ncols=True, mininterval=0.5 if tty else 10)
 
     def update(done, total, *_):
         if bar.total != total:
