@@ -150,14 +150,14 @@ def cmd_reconstruct(args):
     rec = None
     if not distributed:
         with tqdm_callback("building operators", unit="plane") as cb:
-            rec = recipe.build(progress=lambda i, n, label="": cb(i, n))
+            rec = recipe.build(progress=cb)
         meta["settings"] = rec.settings()
     if is_zarr:
         _reconstruct_series(source, recipe, rec, out, save, meta, args)
         return
     frame = frames if frames.ndim == 2 else frames[0]
     with tqdm_callback("reconstructing", unit="iteration") as cb:
-        result = rec.reconstruct(frame, progress=lambda i, n, label="": cb(i, n))
+        result = rec.reconstruct(frame, progress=cb)
     images = _result_images(result, save)
     paths = _output_paths(out, images)
     for name, (data, axes, what) in images.items():

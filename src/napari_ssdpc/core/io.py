@@ -55,27 +55,6 @@ def read_frame(path, *, allow_series: bool = True) -> np.ndarray:
     return data
 
 
-def check_frame(frame, *, shape=None, name="frame", saturation_level=None) -> np.ndarray:
-    """Validate a raw frame and return it as float32. One-line errors name the fix.
-
-    Warns (SsdpcWarning) with the saturated fraction when pixels sit at the top of the
-    range (``saturation_level`` or the integer dtype's maximum).
-    """
-    a = np.asarray(frame)
-    if a.dtype.kind not in "uif":
-        raise SsdpcError(f"{name}: dtype {a.dtype} is not numeric; give a grey-level camera frame")
-    if a.ndim != 2:
-        raise SsdpcError(f"{name}: expected a 2D frame (y, x), got shape {a.shape}")
-    if shape is not None and tuple(a.shape) != tuple(shape):
-        raise SsdpcError(f"{name}: shape {a.shape} does not match the calibration {tuple(shape)}; "
-                         "calibrate on a frame from the same camera and binning")
-    if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
-        bad = int(np.size(a) - np.count_nonzero(np.isfinite(a)))
-        raise SsdpcError(f"{name}: {bad} non-finite pixels (NaN/inf); replace them or re-export the frame")
-    warn_saturation(a, name=name, level=saturation_level)
-    return a.astype(np.float32, copy=False)
-
-
 def saturated_fraction(frame, level=None) -> float:
     """Fraction of pixels at the top of the range: ``level``, else the full scale of an
     integer frame (2**b − 1 for a b-bit camera in a 16-bit container, b in 8..16)."""
@@ -125,13 +104,6 @@ def write_ome_tiff(path, data, *, axes: str, voxel_um=None, description: dict | 
     path = Path(path)
     with atomic_write(path) as tmp:
         tifffile.imwrite(tmp, np.asarray(data), ome=True, metadata=meta)
-    return path
-
-
-def write_json(path, obj) -> Path:
-    path = Path(path)
-    with atomic_write(path) as tmp:
-        tmp.write_text(json.dumps(obj, indent=2))
     return path
 
 
