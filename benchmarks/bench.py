@@ -2,13 +2,13 @@
 
     python benchmarks/bench.py [--quick] [--json] [--device gpu] [--cache DIR] [--no-reference]
 
-The same as ``ssdpc bench``; the code lives in ``napari_ssdpc.core.bench`` so that an installed
+The same as ``ssdpc bench``; the code lives in ``napari_ssdpc.validation.bench`` so that an installed
 package can run it too.
 """
 
 import sys
 
-from napari_ssdpc.cli import main
+from napari_ssdpc.cli.main import main
 
 if __name__ == "__main__":
     sys.exit(main(["bench", *sys.argv[1:]]))

@@ -9,20 +9,22 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import scipy.fft as sfft  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
-from matplotlib.patches import Circle  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import scipy.fft as sfft
+from matplotlib.lines import Line2D
+from matplotlib.patches import Circle
 
-from napari_ssdpc.core.optics import Optics  # noqa: E402
-from napari_ssdpc.core.transfer import dpc_transfer_functions, lenslet_case  # noqa: E402
+from napari_ssdpc.physics.transfer import dpc_transfer_functions, lenslet_case
+from napari_ssdpc.settings.optics import Optics
 
 OUT = Path(__file__).resolve().parent / "images"
 COLOURS = {"inside": "tab:blue", "straddling": "tab:orange", "outside": "0.6"}
-LABELS = {"inside": "inside the source: incoherent, absorption only",
-          "straddling": "straddling the edge: DPC-like phase contrast",
-          "outside": "outside: dark field (2nd order)"}
+LABELS = {
+    "inside": "inside the source: incoherent, absorption only",
+    "straddling": "straddling the edge: DPC-like phase contrast",
+    "outside": "outside: dark field (2nd order)",
+}
 
 
 def source_over_lenslets(optics: Optics, condenser_nas=(0.1, 0.25)):
@@ -41,7 +43,7 @@ def source_over_lenslets(optics: Optics, condenser_nas=(0.1, 0.25)):
             ax.add_patch(Circle((x, y), o.subaperture_na, fill=False, lw=1.6, color=c))
             ax.text(x, y, ",".join(h[0] for h in ln.halves), fontsize=7, ha="center", va="center", color=c)
         ax.set_xlim(-0.48, 0.48)
-        ax.set_ylim(0.48, -0.48)                 # y down, as on the sensor
+        ax.set_ylim(0.48, -0.48)  # y down, as on the sensor
         ax.set_aspect("equal")
         ax.set_xlabel("MLA x / (f_obj m_r) = −λ u_x (NA units)")
         ax.set_ylabel("MLA y / (f_obj m_r) = −λ u_y (NA units)")
@@ -49,8 +51,11 @@ def source_over_lenslets(optics: Optics, condenser_nas=(0.1, 0.25)):
     handles = [Line2D([], [], color=COLOURS[k], lw=2, label=LABELS[k]) for k in LABELS]
     handles.append(Line2D([], [], color="gold", lw=8, alpha=0.45, label="condenser (source) disk"))
     fig.legend(handles=handles, loc="lower center", ncol=2, fontsize=8)
-    fig.suptitle("Source disk over the lenslet sub-apertures; labels: halves of paper Eq. 5 "
-                 "(u = up, d = down, l = left, r = right)", fontsize=10)
+    fig.suptitle(
+        "Source disk over the lenslet sub-apertures; labels: halves of paper Eq. 5 "
+        "(u = up, d = down, l = left, r = right)",
+        fontsize=10,
+    )
     fig.tight_layout(rect=(0, 0.12, 1, 0.96))
     return fig
 

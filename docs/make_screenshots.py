@@ -46,11 +46,11 @@ def main():
     import napari
     from qtpy.QtWidgets import QApplication
 
-    from napari_ssdpc._profiles import ProfileWidget
-    from napari_ssdpc._widgets import CalibrateWidget, OperatorsWidget, OpticsWidget, ReconstructWidget
+    from napari_ssdpc._napari.profiles import ProfileWidget
+    from napari_ssdpc._napari.widgets import CalibrateWidget, OperatorsWidget, OpticsWidget, ReconstructWidget
 
     OUT.mkdir(exist_ok=True)
-    napari.settings.get_settings().application.gui_notification_level = "error"   # no toasts in the pictures
+    napari.settings.get_settings().application.gui_notification_level = "error"  # no toasts in the pictures
     viewer = napari.Viewer(title="napari-ssdpc")
     app = QApplication.instance()
     viewer.window._qt_window.resize(1800, 1100)
@@ -97,7 +97,7 @@ def main():
 
     # the RI volume in 3D (minimum-intensity projection: the bead has a lower index than the oil)
     viewer.dims.ndisplay = 3
-    viewer.axes.visible = True                       # z, y, x arrows in the corner
+    viewer.axes.visible = True  # z, y, x arrows in the corner
     viewer.reset_view(layers=[ri])
     viewer.camera.angles = (-20, 35, 140)
     docks["reconstruct"].raise_()
@@ -127,8 +127,10 @@ def main():
         ax.set_title(title)
         ax.axis("off")
     lo, hi = ri.contrast_limits
-    fig.suptitle(f"RI layer, colormap {ri.colormap.name}, {lo:.4f} (blue) … {hi:.4f} (red); "
-                 "napari canvas screenshots with the dims order changed")
+    fig.suptitle(
+        f"RI layer, colormap {ri.colormap.name}, {lo:.4f} (blue) … {hi:.4f} (red); "
+        "napari canvas screenshots with the dims order changed"
+    )
     fig.tight_layout()
     fig.savefig(OUT / "napari_orthogonal.png", dpi=90)
     print(f"wrote {OUT / 'napari_orthogonal.png'}")
@@ -138,11 +140,11 @@ def main():
     viewer.window.add_dock_widget(prof, name="5. Line profile", area="right", tabify=True).raise_()
     prof.image.value = ri
     lines = prof.new_line_layer()
-    to_vox = lambda p: (np.asarray(p) - ri.translate) / ri.scale  # noqa: E731
+    to_vox = lambda p: (np.asarray(p) - ri.translate) / ri.scale  # noqa: E731, RUF100
     lines.add_lines(np.stack([to_vox((0.0, 0.0, -30.0)), to_vox((0.0, 0.0, 30.0))]))
     lines.add_lines(np.stack([to_vox((-36.0, 0.0, 0.0)), to_vox((36.0, 0.0, 0.0))]))
     lines.mode = "pan_zoom"
-    viewer.dims.order = (1, 0, 2)                      # the xz view: the axial line lies in it
+    viewer.dims.order = (1, 0, 2)  # the xz view: the axial line lies in it
     viewer.dims.current_step = tuple(int(c) for c in centre)
     viewer.reset_view(layers=[ri])
     app.processEvents()

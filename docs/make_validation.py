@@ -18,19 +18,22 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from napari_ssdpc import validation as val  # noqa: E402
-from napari_ssdpc.core import phantoms as ph  # noqa: E402
-from napari_ssdpc.core import transfer  # noqa: E402
-from napari_ssdpc.figures import bead_figure  # noqa: E402
+from napari_ssdpc.physics import transfer
+from napari_ssdpc.simulation import phantoms as ph
+from napari_ssdpc.validation import cases as val
+from napari_ssdpc.validation.figures import bead_figure
 
 DOCS = Path(__file__).resolve().parent
 IMAGES = DOCS / "images"
 RESOLUTION = (20.7, 3.9)  # (R_z, R_xy) µm from `ssdpc design`
-METHODS = {"wotf": dict(method="wotf"), "rl-lenslet": dict(method="rl", model="lenslet"),
-           "rl-paper": dict(method="rl", model="paper")}
+METHODS = {
+    "wotf": dict(method="wotf"),
+    "rl-lenslet": dict(method="rl", model="lenslet"),
+    "rl-paper": dict(method="rl", model="paper"),
+}
 
 
 def _clean(d):
@@ -63,8 +66,13 @@ def main():
             m["reconstruction_s"] = sum(res.timings.values())
             out["cases"][f"bead_na{na:g}"][mname] = _clean(m)
             if mname == "wotf":
-                bead_figure(res, case.phantom, case.optics.medium_index, IMAGES / f"validation_bead_na{na:g}.png",
-                            f"PMMA bead (13 µm, n 1.49 in 1.518), condenser NA {na:g}, method wotf")
+                bead_figure(
+                    res,
+                    case.phantom,
+                    case.optics.medium_index,
+                    IMAGES / f"validation_bead_na{na:g}.png",
+                    f"PMMA bead (13 µm, n 1.49 in 1.518), condenser NA {na:g}, method wotf",
+                )
         print("bead", na, time.perf_counter() - t0, flush=True)
 
     # --- two beads
@@ -72,11 +80,17 @@ def main():
     out["cases"]["two-beads"] = {"simulation_s": case.seconds}
     for mname, kw in METHODS.items():
         res, cal, rec = val.reconstruct_case(case, stacks=False, **kw)
-        out["cases"]["two-beads"][mname] = [_clean(val.bead_metrics(res, s, case.optics.medium_index))
-                                            for s in case.phantom.spheres]
+        out["cases"]["two-beads"][mname] = [
+            _clean(val.bead_metrics(res, s, case.optics.medium_index)) for s in case.phantom.spheres
+        ]
         if mname == "wotf":
-            bead_figure(res, case.phantom.spheres[1], case.optics.medium_index, IMAGES / "validation_two_beads.png",
-                        "two beads (6 µm, n 1.56 in 1.518) at z = -25 and +30 µm; slices through the one at +30")
+            bead_figure(
+                res,
+                case.phantom.spheres[1],
+                case.optics.medium_index,
+                IMAGES / "validation_two_beads.png",
+                "two beads (6 µm, n 1.56 in 1.518) at z = -25 and +30 µm; slices through the one at +30",
+            )
     print("two beads", time.perf_counter() - t0, flush=True)
 
     # --- cell
@@ -90,7 +104,7 @@ def main():
     # --- bar target (absorption from the RL stacks)
     case = val.simulate_case("bars", ph.bar_target(), optics, cache_dir=args.cache)
     out["cases"]["bars"] = {"simulation_s": case.seconds}
-    for iterations in (40, 15):   # the figure shows the default (15)
+    for iterations in (40, 15):  # the figure shows the default (15)
         res, cal, rec = val.reconstruct_case(case, z=(0, 80), method="rl", stacks=True, iterations=iterations)
         m = val.bar_metrics(res, case.phantom)
         out["cases"]["bars"][f"iterations_{iterations}"] = _clean(m)
@@ -118,8 +132,12 @@ def main():
             res, cal, rec = val.reconstruct_case(case, z=(-60, 60), stacks=False, method="wotf")
             m = val.bead_metrics(res, weak, 1.518)
             tf = transfer.dpc_transfer_functions(o, rec.lenslets, rec.mask.shape, rec.pixel_um, warn=False)
-            out["sweep"][f"{na:g}"] = {**_clean(m), "dpc_peak": min(tf["contrast"].values()),
-                                      "lit_lenslets": len(rec.lenslets), "simulation_s": case.seconds}
+            out["sweep"][f"{na:g}"] = {
+                **_clean(m),
+                "dpc_peak": min(tf["contrast"].values()),
+                "lit_lenslets": len(rec.lenslets),
+                "simulation_s": case.seconds,
+            }
             print("sweep", na, time.perf_counter() - t0, flush=True)
         s = out["sweep"]
         x = [float(k) / 0.4 for k in s]

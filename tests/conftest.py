@@ -21,10 +21,10 @@ def synthetic_series(tmp_path_factory):
     frames of the flat frame with smooth random modulations, for the series and bench tests."""
     from scipy import ndimage
 
-    from napari_ssdpc.core import simulate as sim
-    from napari_ssdpc.core.grid import Grid
-    from napari_ssdpc.core.lenslets import calibrate
-    from napari_ssdpc.core.optics import Optics
+    from napari_ssdpc.calibration.calibrate import calibrate
+    from napari_ssdpc.physics.lattice import Grid
+    from napari_ssdpc.settings.optics import Optics
+    from napari_ssdpc.simulation import simulate as sim
 
     optics = Optics.paper()
     grid = Grid.nominal(optics, axis_offset_px=(3.7, -2.2), rotation_deg=0.4)

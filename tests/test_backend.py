@@ -7,12 +7,12 @@ import types
 import numpy as np
 import pytest
 
-from napari_ssdpc.core import backend
-from napari_ssdpc.core.backend import get_backend, gpu_available
-from napari_ssdpc.core.deconvolution import Band, MultiViewRL
-from napari_ssdpc.core.errors import SsdpcError
-from napari_ssdpc.core.optics import Optics
-from napari_ssdpc.core.pipeline import Reconstructor
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.reconstruction import backend
+from napari_ssdpc.reconstruction.backend import get_backend, gpu_available
+from napari_ssdpc.reconstruction.deconvolution import Band, MultiViewRL
+from napari_ssdpc.reconstruction.pipeline import Reconstructor
+from napari_ssdpc.settings.optics import Optics
 
 needs_gpu = pytest.mark.skipif(not gpu_available(), reason="needs CuPy and a CUDA GPU")
 

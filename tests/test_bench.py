@@ -7,11 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from napari_ssdpc.cli import main
-from napari_ssdpc.core.bench import format_report, run_bench
-from napari_ssdpc.core.pipeline import Reconstructor
-from napari_ssdpc.core.reference import layout, max_relative_difference, reconstruct_reference
-from napari_ssdpc.validation import Case
+from napari_ssdpc.cli.main import main
+from napari_ssdpc.reconstruction.pipeline import Reconstructor
+from napari_ssdpc.validation.bench import format_report, run_bench
+from napari_ssdpc.validation.cases import Case
+from napari_ssdpc.validation.reference import layout, max_relative_difference, reconstruct_reference
 
 
 @pytest.fixture(scope="module")
@@ -23,7 +23,7 @@ def _check_equal(rec, frame, canvas):
     fast = rec.reconstruct(frame)
     ref = reconstruct_reference(rec, frame, canvas=canvas)
     for h, stack in fast.stacks.items():
-        assert np.ptp(stack) > 0.05 * np.abs(stack).max()          # a real image, not a constant
+        assert np.ptp(stack) > 0.05 * np.abs(stack).max()  # a real image, not a constant
         assert max_relative_difference(stack, ref.stacks[h]) < 1e-3
     assert max_relative_difference(fast.delta_n, ref.delta_n) < 1e-3
     return ref
@@ -33,7 +33,7 @@ def test_reference_path_equals_fast_path_on_the_ei_box(data):
     optics, cal, flat, frames, _ = data
     rec = Reconstructor(optics, cal, z=(-40, 40), dz=10, iterations=4, flat=flat, method="rl")
     ref = _check_equal(rec, frames[0], "eis")
-    assert ref.layout.area_ratio > 4            # four 2x2-spread windows and their margins
+    assert ref.layout.area_ratio > 4  # four 2x2-spread windows and their margins
 
 
 def test_reference_path_on_the_whole_sensor(data):
@@ -48,11 +48,11 @@ def test_spread_layout_keeps_every_kernel_and_separates_the_eis(data):
     rec = Reconstructor(optics, cal, z=(-80, 80), dz=40, iterations=1, flat=flat, method="rl")
     lay = layout(rec, "eis")
     shift = np.abs(rec.psf.tilt).max() * 80 / rec.pixel_um
-    assert min(lay.reach) >= rec.psf.support_px // 2 + shift      # the crop keeps the kernel support
+    assert min(lay.reach) >= rec.psf.support_px // 2 + shift  # the crop keeps the kernel support
     # light of one lenslet, from anywhere in the object domain, never reaches another lenslet's view
     import scipy.fft as sfft
 
-    from napari_ssdpc.core.reference import _kernels, full_frame_psf
+    from napari_ssdpc.validation.reference import _kernels, full_frame_psf
 
     kernels = np.abs(_kernels(rec, 80.0, lay))
     ones = np.ones(lay.fft_shape, np.float32)
@@ -77,7 +77,7 @@ def test_quick_bench_report(data):
     assert st["fast"]["lit_lenslets"] == 4 and 0 < st["fast"]["band_fraction"] < 0.3
     assert st["series"]["frames"] == 3
     assert report["machine"]["cores"] >= 1 and report["targets"]["peak_memory_gb"] > 0
-    json.dumps(report)                                            # JSON-able for --json
+    json.dumps(report)  # JSON-able for --json
     text = format_report(report)
     assert "| fast, NA 0.1 (standard) | 11 | 4 |" in text and "serial, OME-Zarr" in text
 

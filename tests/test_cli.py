@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from napari_ssdpc.cli import main
+from napari_ssdpc.cli.main import main
 
 
 def test_design_table_and_json(capsys):
@@ -19,10 +19,13 @@ def test_design_table_and_json(capsys):
     assert d["dof_full_um"] == pytest.approx(265.06, rel=5e-3) and d["lenslets_in_pupil"] == 32
 
 
-@pytest.mark.parametrize("argv, words", [
-    (["design", "--optics", "missing.yaml"], "optics file not found"),
-    (["calibrate", "missing.tif", "-o", "c.json"], "file not found"),
-])
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["design", "--optics", "missing.yaml"], "optics file not found"),
+        (["calibrate", "missing.tif", "-o", "c.json"], "file not found"),
+    ],
+)
 def test_bad_input_is_one_line_error(tmp_path, monkeypatch, capsys, argv, words):
     monkeypatch.chdir(tmp_path)
     assert main(argv) == 2
@@ -45,6 +48,7 @@ def test_napari_manifest_validates():
     mf = pm.get_manifest("napari-ssdpc")
     assert mf.name == "napari-ssdpc"
     assert all(c.id.startswith("napari-ssdpc.") for c in mf.contributions.commands)
-    r = subprocess.run([sys.executable, "-m", "npe2", "validate", "napari-ssdpc", "--imports"],
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        [sys.executable, "-m", "npe2", "validate", "napari-ssdpc", "--imports"], capture_output=True, text=True
+    )
     assert r.returncode == 0, r.stdout + r.stderr

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from napari_ssdpc.core.deconvolution import MultiViewRL, kernels_to_otf, padded_shape
-from napari_ssdpc.core.errors import SsdpcError
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.reconstruction.deconvolution import MultiViewRL, kernels_to_otf, padded_shape
 
 
 def _parallax_kernels(n_views=4, zs=(-6, -3, 0, 3, 6), size=21, sigma=1.2):
@@ -52,8 +52,8 @@ def test_points_are_found_at_their_depth(op):
     rl, _ = op
     truth = np.full((rl.z,) + rl.fft_shape, 0.2, np.float32)
     truth[:, 48:, :] = truth[:, :, 48:] = 0
-    truth[1, 15, 30] += 30.0   # z index 1
-    truth[4, 32, 14] += 30.0   # z index 4
+    truth[1, 15, 30] += 30.0  # z index 1
+    truth[4, 32, 14] += 30.0  # z index 4
     views = np.clip(rl.forward(truth)[:, :48, :48], 0, None)
     res = rl.run(views, 40)
     assert np.argmax(res.stack[:, 15, 30]) == 1 and np.argmax(res.stack[:, 32, 14]) == 4

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from napari_ssdpc.core.dpc import dpc_image, phase_to_delta_n, refractive_index, tikhonov_phase
+from napari_ssdpc.reconstruction.dpc import dpc_image, phase_to_delta_n, refractive_index, tikhonov_phase
 
 
 def test_dpc_image_range_and_sign():

@@ -15,14 +15,19 @@ import warnings
 import numpy as np
 import pytest
 
-from napari_ssdpc.core import simulate as sim
-from napari_ssdpc.core.errors import SsdpcError, SsdpcWarning
-from napari_ssdpc.core.grid import Grid
-from napari_ssdpc.core.lenslets import (
-    CALIBRATION_VERSION, Calibration, calibrate, extract_views, insert_views, overlay_png,
+from napari_ssdpc.calibration.calibrate import (
+    CALIBRATION_VERSION,
+    Calibration,
+    calibrate,
+    extract_views,
+    insert_views,
+    overlay_png,
 )
-from napari_ssdpc.core.optics import Optics
-from napari_ssdpc.core.phantoms import Box, Composite, pmma_bead
+from napari_ssdpc.errors import SsdpcError, SsdpcWarning
+from napari_ssdpc.physics.lattice import Grid
+from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.simulation import simulate as sim
+from napari_ssdpc.simulation.phantoms import Box, Composite, pmma_bead
 
 OPTICS = Optics.paper()
 P = OPTICS.pitch_px
@@ -33,13 +38,19 @@ FLAT_AXIS_PX = 1.0
 def random_grids(n, seed):
     """Grids with random axis offsets (±half a pitch) and rotations (±5°), seeded."""
     rng = np.random.default_rng(seed)
-    return [Grid.nominal(OPTICS, axis_offset_px=tuple(rng.uniform(-0.5, 0.5, 2) * P),
-                         rotation_deg=float(rng.uniform(-5, 5))) for _ in range(n)]
+    return [
+        Grid.nominal(
+            OPTICS, axis_offset_px=tuple(rng.uniform(-0.5, 0.5, 2) * P), rotation_deg=float(rng.uniform(-5, 5))
+        )
+        for _ in range(n)
+    ]
 
 
 SWEEP = random_grids(12, seed=2024)
-EXTREMES = [Grid.nominal(OPTICS, axis_offset_px=(0.49 * P, -0.49 * P), rotation_deg=5.0),
-            Grid.nominal(OPTICS, axis_offset_px=(-0.45 * P, 0.2 * P), rotation_deg=-5.0)]
+EXTREMES = [
+    Grid.nominal(OPTICS, axis_offset_px=(0.49 * P, -0.49 * P), rotation_deg=5.0),
+    Grid.nominal(OPTICS, axis_offset_px=(-0.45 * P, 0.2 * P), rotation_deg=-5.0),
+]
 
 
 def grid_errors(cal, truth):
@@ -114,8 +125,10 @@ def test_white_frame_sweep():
     for grid, seed in cases:
         cal, _ = check_white(grid, seed=seed)
         worst = np.maximum(worst, grid_errors(cal, grid))
-    print(f"worst of {len(cases)} white frames: axis {worst[0]:.3f} px, EI {worst[1]:.3f} px, "
-          f"pitch {100 * worst[2]:.4f} %, rotation {worst[3]:.4f} deg")
+    print(
+        f"worst of {len(cases)} white frames: axis {worst[0]:.3f} px, EI {worst[1]:.3f} px, "
+        f"pitch {100 * worst[2]:.4f} %, rotation {worst[3]:.4f} deg"
+    )
 
 
 def test_flipped_camera_keeps_labels():
@@ -148,8 +161,10 @@ def test_flat_frame_few_lit_lenslets():
 @pytest.mark.slow
 def test_flat_frame_sweep():
     worst = np.max([check_flat(g, seed=20 + k) for k, g in enumerate(SWEEP[:10])], axis=0)
-    print(f"worst of 10 flat frames: axis {worst[0]:.3f} px, EI {worst[1]:.3f} px, "
-          f"pitch {100 * worst[2]:.4f} %, rotation {worst[3]:.4f} deg")
+    print(
+        f"worst of 10 flat frames: axis {worst[0]:.3f} px, EI {worst[1]:.3f} px, "
+        f"pitch {100 * worst[2]:.4f} %, rotation {worst[3]:.4f} deg"
+    )
 
 
 def check_sample(grid, source, check_axis):
@@ -175,8 +190,10 @@ def test_sample_frame_lattice():
 @pytest.mark.slow
 def test_sample_frame_axis():
     worst = np.max([check_sample(SWEEP[k], None, check_axis=True) for k in (4, 5)], axis=0)
-    print(f"worst of 2 sample frames: axis {worst[0]:.3f} px, EI {worst[1]:.3f} px, "
-          f"pitch {100 * worst[2]:.4f} %, rotation {worst[3]:.4f} deg")
+    print(
+        f"worst of 2 sample frames: axis {worst[0]:.3f} px, EI {worst[1]:.3f} px, "
+        f"pitch {100 * worst[2]:.4f} %, rotation {worst[3]:.4f} deg"
+    )
 
 
 # ---------------------------------------------------------------- bad input
@@ -204,7 +221,7 @@ def test_bad_frames(white):
         (nan, "NaN"),
     ]
     for bad, words in cases:
-        _one_line_error(lambda: calibrate(bad, OPTICS), words)
+        _one_line_error(lambda: calibrate(bad, OPTICS), words)  # noqa: B023
     _one_line_error(lambda: calibrate(frame, OPTICS, kind="grey"), "kind")
     _one_line_error(lambda: calibrate(frame, "paper"), "Optics")
 
@@ -223,7 +240,7 @@ def test_too_few_lit_lenslets_asks_for_a_white_frame(white):
     one = np.full_like(frame, 100)
     c = np.round(cal.centres_px[np.argmax(cal.brightness)]).astype(int)
     r = int(cal.ei_radius_px) + 12
-    one[c[1] - r:c[1] + r, c[0] - r:c[0] + r] = frame[c[1] - r:c[1] + r, c[0] - r:c[0] + r]
+    one[c[1] - r : c[1] + r, c[0] - r : c[0] + r] = frame[c[1] - r : c[1] + r, c[0] - r : c[0] + r]
     _one_line_error(lambda: calibrate(one, OPTICS), "white frame")
 
 
@@ -255,7 +272,7 @@ def test_json_bad_files(white, tmp_path):
     ]:
         p = tmp_path / name
         p.write_text(content)
-        _one_line_error(lambda: Calibration.from_json(p), words)
+        _one_line_error(lambda: Calibration.from_json(p), words)  # noqa: B023
     _one_line_error(lambda: Calibration.from_json(tmp_path / "missing.json"), "not found")
 
 
@@ -317,7 +334,7 @@ def test_insert_views_inverts_extract_views(white):
     grid, _, cal = white
     frame = sim.white_intensity(OPTICS, grid=grid)
     back = insert_views(extract_views(frame, cal, order=3), cal, order=3)
-    yy, xx = np.mgrid[:frame.shape[0], :frame.shape[1]]
+    yy, xx = np.mgrid[: frame.shape[0], : frame.shape[1]]
     inner = np.zeros(frame.shape, bool)
     for cx, cy in cal.centres_px:
         inner |= (xx - cx) ** 2 + (yy - cy) ** 2 < (0.85 * cal.ei_radius_px) ** 2

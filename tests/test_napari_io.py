@@ -8,12 +8,14 @@ import numpy as np
 import pytest
 import tifffile
 
-from napari_ssdpc import _reader, _sample_data, _writer
-from napari_ssdpc.core.errors import SsdpcError
-from napari_ssdpc.core.io import write_ome_tiff
-from napari_ssdpc.core.lenslets import calibrate
-from napari_ssdpc.core.optics import Optics
-from napari_ssdpc.core.simulate import white_frame
+from napari_ssdpc._napari import reader as _reader
+from napari_ssdpc._napari import sample_data as _sample_data
+from napari_ssdpc._napari import writer as _writer
+from napari_ssdpc.calibration.calibrate import calibrate
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.io.frames import write_ome_tiff
+from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.simulation.simulate import white_frame
 
 pytest.importorskip("napari")
 
@@ -46,16 +48,15 @@ def test_raw_frame_reader(tmp_path):
 def test_raw_series_reader_is_lazy(tmp_path, compression):
     series = np.random.default_rng(1).integers(0, 4095, (3, 64, 80), dtype=np.uint16)
     p = tmp_path / "series.ome.tif"
-    tifffile.imwrite(p, series, photometric="minisblack", metadata={"axes": "TYX"}, compression=compression,
-                     ome=True)
+    tifffile.imwrite(p, series, photometric="minisblack", metadata={"axes": "TYX"}, compression=compression, ome=True)
     [(data, kw, _)] = _layers(p, _reader.get_raw_reader)
     assert data.shape == (3, 64, 80) and kw["axis_labels"] == ("t", "y", "x")
     if compression is None:
-        assert isinstance(data, np.memmap)          # pixels stay on disk until sliced
+        assert isinstance(data, np.memmap)  # pixels stay on disk until sliced
     else:
         import dask.array as da
 
-        assert isinstance(data, da.Array)           # compressed: lazily through tifffile's zarr store
+        assert isinstance(data, da.Array)  # compressed: lazily through tifffile's zarr store
     assert np.array_equal(np.asarray(data[2]), series[2])
 
 
@@ -63,8 +64,12 @@ def test_foreign_files_give_none(tmp_path):
     rgb = tmp_path / "photo.tif"
     tifffile.imwrite(rgb, np.zeros((64, 64, 3), np.uint8), photometric="rgb")
     vol = tmp_path / "stack.ome.tif"
-    tifffile.imwrite(vol, np.zeros((5, 64, 64), np.float32), ome=True,
-                     metadata={"axes": "ZYX", "PhysicalSizeZ": 1.0, "PhysicalSizeX": 0.2, "PhysicalSizeY": 0.2})
+    tifffile.imwrite(
+        vol,
+        np.zeros((5, 64, 64), np.float32),
+        ome=True,
+        metadata={"axes": "ZYX", "PhysicalSizeZ": 1.0, "PhysicalSizeX": 0.2, "PhysicalSizeY": 0.2},
+    )
     text = tmp_path / "notes.tif"
     text.write_text("not a tiff")
     other_json = tmp_path / "other.json"
@@ -93,7 +98,7 @@ def test_calibration_reader_circles_and_labelled_centres(tmp_path):
     (shapes, skw, sk), (pts, pkw, pk) = _layers(p, _reader.get_calibration_reader)
     k = len(cal.lenslets)
     assert (sk, pk) == ("shapes", "points") and skw["shape_type"] == "ellipse" and len(shapes) == k
-    centre = shapes[0].mean(axis=0)                       # ellipse corners -> centre (y, x)
+    centre = shapes[0].mean(axis=0)  # ellipse corners -> centre (y, x)
     assert np.allclose(centre[::-1], cal.centres_px[0], atol=1e-9)
     assert np.allclose(np.ptp(shapes[0], axis=0), 2 * cal.ei_radius_px)
     assert pts.shape == (k + 1, 2) and np.allclose(pts[:k, ::-1], cal.centres_px)
@@ -106,9 +111,14 @@ def test_calibration_reader_circles_and_labelled_centres(tmp_path):
 # ------------------------------------------------------------------ results: writer
 def test_ome_tiff_roundtrip_keeps_scale_and_labels(tmp_path):
     vol = np.random.default_rng(2).normal(1.518, 0.01, (5, 30, 40)).astype(np.float32)
-    meta = {"name": "bead RI", "scale": (2.0, 0.8456, 0.8456), "translate": (-4.0, -12.0, -16.0),
-            "metadata": {"ssdpc": {"kind": "result", "quantity": "ri", "medium_index": 1.518,
-                                   "settings": {"rl_iterations": 3}}}}
+    meta = {
+        "name": "bead RI",
+        "scale": (2.0, 0.8456, 0.8456),
+        "translate": (-4.0, -12.0, -16.0),
+        "metadata": {
+            "ssdpc": {"kind": "result", "quantity": "ri", "medium_index": 1.518, "settings": {"rl_iterations": 3}}
+        },
+    }
     [out] = _writer.write_volume(str(tmp_path / "bead.ome.tif"), vol, meta)
     [(data, kw, _)] = _layers(out, _reader.get_result_reader)
     assert np.array_equal(np.asarray(data), vol)
@@ -117,8 +127,8 @@ def test_ome_tiff_roundtrip_keeps_scale_and_labels(tmp_path):
     info = kw["metadata"]["ssdpc"]
     assert info["quantity"] == "ri" and info["settings"] == {"rl_iterations": 3}
     lo, hi = kw["contrast_limits"]
-    assert lo < 1.518 < hi and hi - 1.518 == pytest.approx(1.518 - lo)   # centred on the medium
-    with tifffile.TiffFile(out) as tif:                                     # standard OME sizes too
+    assert lo < 1.518 < hi and hi - 1.518 == pytest.approx(1.518 - lo)  # centred on the medium
+    with tifffile.TiffFile(out) as tif:  # standard OME sizes too
         px = tifffile.xml2dict(tif.ome_metadata)["OME"]["Image"]["Pixels"]
         assert (px["PhysicalSizeZ"], px["PhysicalSizeX"]) == (2.0, 0.8456)
 
@@ -128,13 +138,17 @@ def test_ome_zarr_time_series_roundtrip(tmp_path):
     import zarr
 
     series = np.random.default_rng(3).normal(0, 1, (3, 4, 20, 24)).astype(np.float32)
-    meta = {"name": "cells phase", "scale": (1.0, 2.0, 0.85, 0.85), "translate": (0.0, -4.0, -8.0, -10.0),
-            "metadata": {"ssdpc": {"quantity": "phase"}}}
+    meta = {
+        "name": "cells phase",
+        "scale": (1.0, 2.0, 0.85, 0.85),
+        "translate": (0.0, -4.0, -8.0, -10.0),
+        "metadata": {"ssdpc": {"quantity": "phase"}},
+    }
     path = tmp_path / "cells.zarr"
     _writer.write_volume(str(path), series, meta)
-    _writer.write_volume(str(path), series * 2, meta)            # overwrite: the group is replaced whole
+    _writer.write_volume(str(path), series * 2, meta)  # overwrite: the group is replaced whole
     ri_meta = {**meta, "name": "cells RI", "metadata": {"ssdpc": {"quantity": "ri", "medium_index": 1.33}}}
-    _writer.write_volume(str(path), series + 1.33, ri_meta)      # a second quantity in the same store
+    _writer.write_volume(str(path), series + 1.33, ri_meta)  # a second quantity in the same store
     g = zarr.open_group(str(path / "phase"), mode="r")
     ms = g.attrs["multiscales"][0]
     assert [a["name"] for a in ms["axes"]] == ["t", "z", "y", "x"] and ms["axes"][1]["unit"] == "micrometer"
@@ -146,7 +160,7 @@ def test_ome_zarr_time_series_roundtrip(tmp_path):
     assert kw["name"] == "cells phase" and rkw["name"] == "cells RI"
     assert kw["axis_labels"] == ("t", "z", "y", "x") and kw["scale"] == (1.0, 2.0, 0.85, 0.85)
     assert kw["translate"] == (0.0, -4.0, -8.0, -10.0)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["cells.zarr"]   # no temporary folders left
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cells.zarr"]  # no temporary folders left
     with pytest.raises(SsdpcError, match="dimensions"):
         _writer.write_volume(str(tmp_path / "x.ome.tif"), np.zeros((10, 10)), {"name": "raw"})
 
@@ -160,7 +174,7 @@ def test_time_series_sample_is_lazy_20_frames(tmp_path, monkeypatch):
     layers = _sample_data.moving_sample_series()
     series = layers[-1][0]
     assert isinstance(series, da.Array) and series.shape == (20, 2048, 2448) and series.dtype == np.uint16
-    assert calls == []                               # nothing simulated until a frame is read
+    assert calls == []  # nothing simulated until a frame is read
     series[7].compute()
     assert calls == [7]
     assert layers[-1][1]["axis_labels"] == ("t", "y", "x")
@@ -171,18 +185,42 @@ def test_time_series_sample_is_lazy_20_frames(tmp_path, monkeypatch):
 def test_reads_the_cli_reconstruction_outputs(tmp_path):
     """The result reader opens what `ssdpc reconstruct` writes, with µm scale and the view
     centred on the optical axis; a series goes to OME-Zarr and opens as (t, z, y, x)."""
-    from napari_ssdpc.cli import main
+    from napari_ssdpc.cli.main import main
 
     frame, flat, white, optics = _sample_data.bead_frames()
     tifffile.imwrite(tmp_path / "bead.tif", frame)
     tifffile.imwrite(tmp_path / "flat.tif", flat)
-    tifffile.imwrite(tmp_path / "series.tif", np.stack([frame, frame]), photometric="minisblack",
-                     metadata={"axes": "TYX"})
+    tifffile.imwrite(
+        tmp_path / "series.tif", np.stack([frame, frame]), photometric="minisblack", metadata={"axes": "TYX"}
+    )
     calibrate(white, optics).to_json(tmp_path / "calib.json")
-    common = ["--calibration", str(tmp_path / "calib.json"), "--flat", str(tmp_path / "flat.tif"),
-              "--z", "-10", "10", "--dz", "2", "--iterations", "2"]
-    assert main(["reconstruct", str(tmp_path / "bead.tif"), *common, "--save", "phase,dpc",
-                 "-o", str(tmp_path / "out.ome.tif")]) == 0
+    common = [
+        "--calibration",
+        str(tmp_path / "calib.json"),
+        "--flat",
+        str(tmp_path / "flat.tif"),
+        "--z",
+        "-10",
+        "10",
+        "--dz",
+        "2",
+        "--iterations",
+        "2",
+    ]
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(tmp_path / "bead.tif"),
+                *common,
+                "--save",
+                "phase,dpc",
+                "-o",
+                str(tmp_path / "out.ome.tif"),
+            ]
+        )
+        == 0
+    )
     [(ri, kw, _)] = _layers(tmp_path / "out.ome.tif", _reader.get_result_reader)
     assert kw["name"] == "out RI" and ri.shape == (11, 145, 145)
     assert np.allclose(kw["scale"], (2.0, optics.object_pixel_um, optics.object_pixel_um), rtol=2e-3)

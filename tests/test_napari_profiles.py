@@ -11,9 +11,9 @@ from scipy import ndimage
 pytest.importorskip("napari")
 pytest.importorskip("pytestqt")
 
-from napari_ssdpc._profiles import ProfileWidget, orientation, sample_line  # noqa: E402
+from napari_ssdpc._napari.profiles import ProfileWidget, orientation, sample_line
 
-SCALE = (2.0, 0.8456, 0.8456)            # (dz, dy, dx) µm, as a reconstruction
+SCALE = (2.0, 0.8456, 0.8456)  # (dz, dy, dx) µm, as a reconstruction
 ORIGIN = (-20.0, -61.0, -61.0)
 
 
@@ -58,7 +58,7 @@ def test_xy_and_xz_profiles_equal_map_coordinates(make_napari_viewer, tmp_path):
     for p, (a, b) in zip(profiles, (xy, xz)):
         d = p["distance_um"]
         assert d[0] == 0 and d[-1] == pytest.approx(np.linalg.norm(b - a), rel=1e-9)
-        assert len(d) >= np.linalg.norm((b - a) / SCALE)           # at least one sample per voxel
+        assert len(d) >= np.linalg.norm((b - a) / SCALE)  # at least one sample per voxel
         np.testing.assert_allclose(p["values"], _expected(data, a, b, d), rtol=0, atol=1e-6)
         np.testing.assert_allclose(p["world"][-1], b, atol=1e-9)
     # the plot follows the line when it moves
@@ -83,13 +83,14 @@ def test_xy_and_xz_profiles_equal_map_coordinates(make_napari_viewer, tmp_path):
 def test_time_series_profile_follows_the_slider(make_napari_viewer):
     viewer = make_napari_viewer()
     series = np.stack([_volume(seed=s) for s in range(3)])
-    img = viewer.add_image(series, scale=(1.0,) + SCALE, translate=(0.0,) + ORIGIN, name="cells RI",
-                           axis_labels=("t", "z", "y", "x"))
+    img = viewer.add_image(
+        series, scale=(1.0,) + SCALE, translate=(0.0,) + ORIGIN, name="cells RI", axis_labels=("t", "z", "y", "x")
+    )
     dock = ProfileWidget(viewer)
     viewer.window.add_dock_widget(dock)
     dock.image.value = img
-    lines = dock.new_line_layer()                                    # 3D lines: shown at every t
-    a, b = np.array([-20.0, 0.0, 0.0]), np.array([20.0, 0.0, 0.0])   # along z through the centre
+    lines = dock.new_line_layer()  # 3D lines: shown at every t
+    a, b = np.array([-20.0, 0.0, 0.0]), np.array([20.0, 0.0, 0.0])  # along z through the centre
     lines.add_lines(np.stack([(a - ORIGIN) / SCALE, (b - ORIGIN) / SCALE]))
     a, b = (v.astype(float) * SCALE + ORIGIN for v in lines.data[0])
     for t in (0, 2):
@@ -102,9 +103,9 @@ def test_time_series_profile_follows_the_slider(make_napari_viewer):
 def test_sample_line_checks_its_input():
     vol = _volume((5, 8, 8))
     s, coords, v = sample_line(vol, (1, 2, 2), (1, 2, 6))
-    assert len(s) == 5 and np.allclose(v, vol[1, 2, 2:7])           # on the grid: the voxel values
+    assert len(s) == 5 and np.allclose(v, vol[1, 2, 2:7])  # on the grid: the voxel values
     assert orientation((0, 0, 0), (0, 0, 1), ["z", "y", "x"]) == "along x"
-    from napari_ssdpc.core.errors import SsdpcError
+    from napari_ssdpc.errors import SsdpcError
 
     with pytest.raises(SsdpcError, match="coordinates"):
         sample_line(vol, (1, 2), (1, 3))

@@ -14,9 +14,10 @@ import pytest
 pytest.importorskip("napari")
 pytest.importorskip("pytestqt")
 
-from napari_ssdpc import _sample_data, _widgets  # noqa: E402
-from napari_ssdpc.core.lenslets import calibrate  # noqa: E402
-from napari_ssdpc.core.pipeline import Reconstructor  # noqa: E402
+from napari_ssdpc._napari import sample_data as _sample_data
+from napari_ssdpc._napari import widgets as _widgets
+from napari_ssdpc.calibration.calibrate import calibrate
+from napari_ssdpc.reconstruction.pipeline import Reconstructor
 
 Z, DZ, ITER = (-20.0, 20.0), 2.0, 3
 WORKER_TIMEOUT_MS = 120_000
@@ -24,7 +25,7 @@ WORKER_TIMEOUT_MS = 120_000
 
 @pytest.fixture(scope="module")
 def bead():
-    return _sample_data.bead_frames()          # frame, flat, white, optics (cached on disk)
+    return _sample_data.bead_frames()  # frame, flat, white, optics (cached on disk)
 
 
 @pytest.fixture
@@ -46,8 +47,12 @@ def _wait(qtbot, widget):
 
 def _docks(viewer):
     out = {}
-    for name, cls in (("optics", _widgets.OpticsWidget), ("calibrate", _widgets.CalibrateWidget),
-                      ("operators", _widgets.OperatorsWidget), ("reconstruct", _widgets.ReconstructWidget)):
+    for name, cls in (
+        ("optics", _widgets.OpticsWidget),
+        ("calibrate", _widgets.CalibrateWidget),
+        ("operators", _widgets.OperatorsWidget),
+        ("reconstruct", _widgets.ReconstructWidget),
+    ):
         out[name] = cls(viewer)
         viewer.window.add_dock_widget(out[name], name=name)
     return out
@@ -67,7 +72,7 @@ def _setup_bead(viewer, qtbot, optics):
     rc = w["reconstruct"]
     rc.raw.value = viewer.layers["PMMA bead (raw light field)"]
     rc.flat.value = viewer.layers["PMMA bead flat frame"]
-    rc.iterations.value, rc.alpha.value = ITER, 0.0      # α 0: the method's default
+    rc.iterations.value, rc.alpha.value = ITER, 0.0  # α 0: the method's default
     return w
 
 
@@ -87,7 +92,7 @@ def test_end_to_end_bead(make_napari_viewer, qtbot, bead, errors):
     w["reconstruct"].run()
     _wait(qtbot, w["reconstruct"])
     assert errors == []
-    assert _widgets.session_for(viewer).built[1] is rec_built           # operators reused, not rebuilt
+    assert _widgets.session_for(viewer).built[1] is rec_built  # operators reused, not rebuilt
     ri = viewer.layers["PMMA bead (raw light field) RI"]
     assert ri.data.shape == (21, 145, 145)
     assert np.allclose(ri.scale, (DZ, optics.object_pixel_um, optics.object_pixel_um), rtol=2e-3)
@@ -111,7 +116,7 @@ def test_end_to_end_bead(make_napari_viewer, qtbot, bead, errors):
     w["reconstruct"].iterations.value = ITER + 1
     w["reconstruct"].run()
     _wait(qtbot, w["reconstruct"])
-    ri.colormap = "viridis"                      # a display choice of the user: kept on rerun
+    ri.colormap = "viridis"  # a display choice of the user: kept on rerun
     w["reconstruct"].run()
     _wait(qtbot, w["reconstruct"])
     assert viewer.layers["PMMA bead (raw light field) RI"] is ri and len(viewer.layers) == n_layers + 1
@@ -134,7 +139,7 @@ def test_end_to_end_bead(make_napari_viewer, qtbot, bead, errors):
 def test_time_series_gives_tzyx_layer(make_napari_viewer, qtbot, errors):
     optics = _sample_data.series_optics()
     flat, white = _sample_data.series_flat_white()
-    series = _sample_data.series_array()[:3]          # first 3 frames of the sample series (lazy)
+    series = _sample_data.series_array()[:3]  # first 3 frames of the sample series (lazy)
     viewer = make_napari_viewer()
     viewer.add_image(white, name="white")
     viewer.add_image(flat, name="flat")
@@ -160,7 +165,7 @@ def test_time_series_gives_tzyx_layer(make_napari_viewer, qtbot, errors):
     cal = calibrate(white, optics)
     rec = Reconstructor(optics, cal, z=Z, dz=DZ, iterations=ITER, flat=flat)
     assert np.array_equal(ri.data[2], rec.reconstruct(np.asarray(series[2])).ri)
-    assert not np.array_equal(ri.data[0], ri.data[2])          # the sample moves
+    assert not np.array_equal(ri.data[0], ri.data[2])  # the sample moves
 
 
 def test_cancel_stops_a_running_reconstruction(make_napari_viewer, qtbot, bead, errors):
@@ -168,17 +173,17 @@ def test_cancel_stops_a_running_reconstruction(make_napari_viewer, qtbot, bead, 
     viewer = make_napari_viewer()
     w = _setup_bead(viewer, qtbot, optics)
     rc = w["reconstruct"]
-    rc.iterations.value = 5000                   # minutes of RL if not stopped
+    rc.iterations.value = 5000  # minutes of RL if not stopped
     reports = []
     worker = rc.run()
     worker.yielded.connect(reports.append)
     qtbot.waitUntil(lambda: any(r[2].startswith("RL") for r in reports), timeout=WORKER_TIMEOUT_MS)
     t0 = time.perf_counter()
-    rc.cancel_button.native.click()              # the Cancel button
+    rc.cancel_button.native.click()  # the Cancel button
     _wait(qtbot, rc)
     stopped_s = time.perf_counter() - t0
     rl = [r for r in reports if r[2].startswith("RL")]
-    assert rl[-1][0] < rl[-1][1] / 10            # far from the end of the 4 x 5000 iterations
+    assert rl[-1][0] < rl[-1][1] / 10  # far from the end of the 4 x 5000 iterations
     assert stopped_s < 10.0, f"took {stopped_s:.1f} s to stop"
     assert rc.status.value == "cancelled" and "PMMA bead (raw light field) RI" not in viewer.layers
     assert rc.run_button.enabled and not rc.cancel_button.enabled
@@ -207,7 +212,7 @@ def test_core_errors_are_notifications(make_napari_viewer, qtbot, bead, errors, 
     # sigma >= 1 in the optics editor
     w["optics"].fields["condenser_na"].value = 0.5
     assert len(errors) == 2 and "condenser_na 0.5 >= objective NA 0.4" in errors[1]
-    assert _widgets.session_for(viewer).optics.condenser_na == optics.condenser_na   # bad edit not applied
+    assert _widgets.session_for(viewer).optics.condenser_na == optics.condenser_na  # bad edit not applied
     assert w["optics"].design.value.startswith("⚠")
 
 
@@ -217,7 +222,7 @@ def test_optics_widget_design_numbers_are_live(make_napari_viewer, tmp_path):
     viewer.window.add_dock_widget(ow)
     assert "FOV 122.5 µm" in ow.design.value and "R_xy 3.90 µm" in ow.design.value
     assert "32 in the pupil" in ow.design.value
-    ow.fields["fourier_lens_mm"].value = 150.0          # twice the Fourier lens: M_EI halves, FOV doubles
+    ow.fields["fourier_lens_mm"].value = 150.0  # twice the Fourier lens: M_EI halves, FOV doubles
     d = _widgets.session_for(viewer).optics.design()
     assert _widgets.session_for(viewer).optics.fourier_lens_mm == 150.0
     assert d["fov_um"] == pytest.approx(2 * 122.55, rel=1e-3) and f"FOV {d['fov_um']:.1f} µm" in ow.design.value

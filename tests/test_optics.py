@@ -7,9 +7,8 @@ import numpy as np
 import pytest
 import yaml
 
-from napari_ssdpc.core.errors import SsdpcError, SsdpcWarning
-from napari_ssdpc.core.optics import PAPER_OPTICS, Optics, circle_overlap_fraction
-
+from napari_ssdpc.errors import SsdpcError, SsdpcWarning
+from napari_ssdpc.settings.optics import PAPER_OPTICS, Optics, circle_overlap_fraction
 
 
 @pytest.fixture
@@ -21,9 +20,18 @@ def test_shared_yaml_matches_builtin(paper, shared_optics_path):
     assert Optics.from_yaml(shared_optics_path).to_dict() | {"name": ""} == paper.to_dict() | {"name": ""}
 
 
-@pytest.mark.parametrize("key, expected", [
-    ("fov_um", 122.5), ("r_xy_um", 3.90), ("dof_fwhm_um", 132.53), ("dof_full_um", 265.06),
-    ("dof_pitch_um", 919.1), ("r_z_ffl_um", 20.6), ("r_z_printed_um", 4.2)])
+@pytest.mark.parametrize(
+    "key, expected",
+    [
+        ("fov_um", 122.5),
+        ("r_xy_um", 3.90),
+        ("dof_fwhm_um", 132.53),
+        ("dof_full_um", 265.06),
+        ("dof_pitch_um", 919.1),
+        ("r_z_ffl_um", 20.6),
+        ("r_z_printed_um", 4.2),
+    ],
+)
 def test_design_reproduces_paper_within_half_percent(paper, key, expected):
     tol = 0.005 if key not in ("r_z_ffl_um", "r_z_printed_um") else 0.01  # the paper prints R_z to 2-3 digits
     assert paper.design()[key] == pytest.approx(expected, rel=tol)
@@ -75,16 +83,19 @@ def _with(path, mutate):
     return path
 
 
-@pytest.mark.parametrize("mutate, words", [
-    (lambda d: d["mla"].pop("pitch_um"), "missing key 'mla.pitch_um'"),
-    (lambda d: d["mla"].update(pitch_mm=d["mla"].pop("pitch_um") / 1000), "rename the key"),
-    (lambda d: d.update(wavelength_um=520), "check the unit"),
-    (lambda d: d["sensor"].update(pixel_um=-3.45), "must be positive"),
-    (lambda d: d["mla"].update(grid="hex"), "unknown MLA grid 'hex'"),
-    (lambda d: d.update(condenser_na=0.4), "no phase contrast with a split detection pupil"),
-    (lambda d: d.update(colour="red"), "unknown key 'colour'"),
-    (lambda d: d.update(reconstruction={"dz_um": 0}), "dz_um must be > 0"),
-])
+@pytest.mark.parametrize(
+    "mutate, words",
+    [
+        (lambda d: d["mla"].pop("pitch_um"), "missing key 'mla.pitch_um'"),
+        (lambda d: d["mla"].update(pitch_mm=d["mla"].pop("pitch_um") / 1000), "rename the key"),
+        (lambda d: d.update(wavelength_um=520), "check the unit"),
+        (lambda d: d["sensor"].update(pixel_um=-3.45), "must be positive"),
+        (lambda d: d["mla"].update(grid="hex"), "unknown MLA grid 'hex'"),
+        (lambda d: d.update(condenser_na=0.4), "no phase contrast with a split detection pupil"),
+        (lambda d: d.update(colour="red"), "unknown key 'colour'"),
+        (lambda d: d.update(reconstruction={"dz_um": 0}), "dz_um must be > 0"),
+    ],
+)
 def test_bad_yaml_gives_one_line_error(tmp_path, mutate, words):
     path = _with(tmp_path / "o.yaml", mutate)
     with pytest.raises(SsdpcError) as e:

@@ -4,26 +4,26 @@ import numpy as np
 import pytest
 import tifffile
 
-from napari_ssdpc.cli import main
-from napari_ssdpc.core import analysis as an
-from napari_ssdpc.core import phantoms
-from napari_ssdpc.core.errors import SsdpcError, SsdpcWarning
-from napari_ssdpc.core.pipeline import Cancelled, Reconstructor, z_grid
-from napari_ssdpc.validation import simulate_case, truth_volume
+from napari_ssdpc.cli.main import main
+from napari_ssdpc.errors import SsdpcError, SsdpcWarning
+from napari_ssdpc.reconstruction.pipeline import Cancelled, Reconstructor, z_grid
+from napari_ssdpc.simulation import phantoms
+from napari_ssdpc.validation import metrics as an
+from napari_ssdpc.validation.cases import simulate_case, truth_volume
 
-BEAD = phantoms.Sphere((4.0, -3.0, 0.0), 6.0, 1.528, medium_index=1.518)   # weak: 0.7 rad through the centre
+BEAD = phantoms.Sphere((4.0, -3.0, 0.0), 6.0, 1.528, medium_index=1.518)  # weak: 0.7 rad through the centre
 
 
 @pytest.fixture(scope="module")
 def case(tmp_path_factory):
-    from napari_ssdpc.core.optics import Optics
+    from napari_ssdpc.settings.optics import Optics
 
     return simulate_case("weak-bead-test", BEAD, Optics.paper(), cache_dir=tmp_path_factory.mktemp("sim"))
 
 
 @pytest.fixture(scope="module")
 def calibration(case):
-    from napari_ssdpc.core.lenslets import calibrate
+    from napari_ssdpc.calibration.calibrate import calibrate
 
     return calibrate(case.white, case.optics)
 
@@ -42,9 +42,9 @@ def test_weak_bead_sign_position_and_optical_path(result):
     dn = result.delta_n
     coords = (result.z_um, result.y_um, result.x_um)
     iz, iy, ix = (int(np.argmin(abs(c - v))) for c, v in zip(coords, (0.0, -3.0, 4.0)))
-    assert dn[iz, iy, ix] > 0                                    # n 1.528 > 1.518
+    assert dn[iz, iy, ix] > 0  # n 1.528 > 1.518
     cz, cy, cx = an.centroid(dn, coords, sign=1)
-    assert abs(cx - 4.0) < 1.0 and abs(cy + 3.0) < 1.0          # lateral centroid within 1 µm
+    assert abs(cx - 4.0) < 1.0 and abs(cy + 3.0) < 1.0  # lateral centroid within 1 µm
     # the z-integrated Δn through the centre is the bead's optical path difference (0.01 x 6 µm)
     opd = dn[:, iy, ix].sum() * result.voxel_um[0]
     assert opd == pytest.approx(0.06, rel=0.25)
@@ -57,9 +57,9 @@ def test_result_has_coordinates_and_all_outputs(result, reconstructor):
     assert result.ri.dtype == np.float32 and np.all(np.isfinite(result.ri))
     assert set(result.stacks) == {"up", "down", "left", "right"} and set(result.dpc) == {"ud", "lr"}
     assert result.absorption.shape == result.ri.shape
-    for h in result.convergence.values():      # RL records the relative change per iteration
+    for h in result.convergence.values():  # RL records the relative change per iteration
         assert len(h) == 8 and h[-1] < h[0]
-    assert len(reconstructor.lenslets) == 4    # sigma 0.25: only the central lenslets get direct light
+    assert len(reconstructor.lenslets) == 4  # sigma 0.25: only the central lenslets get direct light
 
 
 def test_paper_route_finds_the_bead_with_the_right_sign(case, calibration):
@@ -108,13 +108,26 @@ def test_cli_reconstruct_writes_ome_tiff_and_keeps_outputs_on_error(case, calibr
         tifffile.imwrite(tmp_path / f"{name}.tif", getattr(case, name))
     calibration.to_json(tmp_path / "cal.json")
     out = tmp_path / "out.ome.tif"
-    args = ["reconstruct", str(tmp_path / "frame.tif"), "--calibration", str(tmp_path / "cal.json"),
-            "--flat", str(tmp_path / "flat.tif"), "--z", "-20", "20", "--dz", "4", "--iterations", "3"]
+    args = [
+        "reconstruct",
+        str(tmp_path / "frame.tif"),
+        "--calibration",
+        str(tmp_path / "cal.json"),
+        "--flat",
+        str(tmp_path / "flat.tif"),
+        "--z",
+        "-20",
+        "20",
+        "--dz",
+        "4",
+        "--iterations",
+        "3",
+    ]
     assert main(args + ["--save", "phase", "-o", str(out)]) == 0
     with tifffile.TiffFile(out) as tif:
         assert tif.series[0].axes == "ZYX" and tif.series[0].shape[0] == 11
         px = tif.ome_metadata
-        assert 'PhysicalSizeZ="4.0"' in px and "PhysicalSizeX=\"0.845588" in px
+        assert 'PhysicalSizeZ="4.0"' in px and 'PhysicalSizeX="0.845588' in px
     assert (tmp_path / "out_phase.ome.tif").is_file()
     before = out.read_bytes()
     capsys.readouterr()
@@ -122,7 +135,11 @@ def test_cli_reconstruct_writes_ome_tiff_and_keeps_outputs_on_error(case, calibr
         assert main(args + bad + ["-o", str(out)]) == 2
         err = capsys.readouterr().err
         assert words in err and err.count("\n") == 1
-    assert main(["reconstruct", str(tmp_path / "missing.tif"), "--calibration", str(tmp_path / "cal.json"),
-                 "-o", str(out)]) == 2
+    assert (
+        main(
+            ["reconstruct", str(tmp_path / "missing.tif"), "--calibration", str(tmp_path / "cal.json"), "-o", str(out)]
+        )
+        == 2
+    )
     assert "file not found" in capsys.readouterr().err
-    assert out.read_bytes() == before   # the good output is untouched
+    assert out.read_bytes() == before  # the good output is untouched

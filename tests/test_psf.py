@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from scipy.special import j0, j1
 
-from napari_ssdpc.core.deconvolution import kernels_to_otf
-from napari_ssdpc.core.errors import SsdpcError
-from napari_ssdpc.core.grid import Grid
-from napari_ssdpc.core.optics import Optics
-from napari_ssdpc.core.psf import LensletPSF, reference_psf
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.physics.lattice import Grid
+from napari_ssdpc.physics.psf import LensletPSF, reference_psf
+from napari_ssdpc.reconstruction.deconvolution import kernels_to_otf
+from napari_ssdpc.settings.optics import Optics
 
 Z = (-80.0, -30.0, 0.0, 30.0, 80.0)
 
@@ -27,7 +27,7 @@ def ref(optics):
 def fast(optics, ref):
     psf = LensletPSF(optics, ref.lenslets)
     windows, offsets = ref.windows(psf.shape)
-    psf.offsets_px = offsets                # sample the kernels on the reference's pixels
+    psf.offsets_px = offsets  # sample the kernels on the reference's pixels
     return psf, windows
 
 
@@ -146,7 +146,7 @@ def test_grid_path_places_eis_behind_the_lenslets(optics):
     for k, ln in enumerate(ref.lenslets):
         if ln.fraction < 0.5:
             continue
-        spot = ref.centres_px[k] + _centroid(windows[0, k], offsets[k])       # sensor (x, y) px
+        spot = ref.centres_px[k] + _centroid(windows[0, k], offsets[k])  # sensor (x, y) px
         assert np.abs(spot - grid.lattice_px(ln.row, ln.col)).max() < 0.05
 
 

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 import tifffile
 
-from napari_ssdpc.cli import main
-from napari_ssdpc.core.backend import gpu_available
-from napari_ssdpc.core.errors import SsdpcError
-from napari_ssdpc.core.io import read_ome_zarr
-from napari_ssdpc.core.series import FrameSource, Recipe, _PagedSeries, done_frames, reconstruct_series
+from napari_ssdpc.cli.main import main
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.io.frames import read_ome_zarr
+from napari_ssdpc.io.series import FrameSource, Recipe, _PagedSeries, done_frames, reconstruct_series
+from napari_ssdpc.reconstruction.backend import gpu_available
 
 SETTINGS = dict(z=(-20.0, 20.0), dz=10.0, iterations=2, method="rl", stacks=True)
 CLI = ["--z", "-20", "20", "--dz", "10", "--iterations", "2", "--method", "rl"]
@@ -56,8 +56,18 @@ def serial(files, tmp_path_factory):
 
 
 def _args(files, out):
-    return ["reconstruct", str(files / "series.tif"), "--calibration", str(files / "cal.json"),
-            "--flat", str(files / "flat.tif")] + CLI + ["-o", str(out)]
+    return (
+        [
+            "reconstruct",
+            str(files / "series.tif"),
+            "--calibration",
+            str(files / "cal.json"),
+            "--flat",
+            str(files / "flat.tif"),
+        ]
+        + CLI
+        + ["-o", str(out)]
+    )
 
 
 def _arrays(out, names=("ri", "phase", "dpc")):
@@ -67,7 +77,7 @@ def _arrays(out, names=("ri", "phase", "dpc")):
 def test_series_store_holds_every_frame_as_reconstructed_alone(serial, data, rec):
     _, _, _, frames = data
     ri, voxel, attrs = read_ome_zarr(serial, "ri")
-    assert ri.shape == (6, 5) + rec.mask.shape and ri.chunks == (1, 5) + rec.mask.shape   # one chunk per frame
+    assert ri.shape == (6, 5) + rec.mask.shape and ri.chunks == (1, 5) + rec.mask.shape  # one chunk per frame
     assert voxel == pytest.approx((10.0, rec.pixel_um, rec.pixel_um))
     assert attrs["settings"]["rl_iterations"] == 2 and attrs["quantity"] == "refractive index"
     assert list(done_frames(serial)) == list(range(6))
@@ -110,7 +120,7 @@ def test_frames_are_streamed_not_loaded(data, recipe, rec, tmp_path):
 
 def test_killed_run_leaves_a_readable_store_and_resumes(serial, files, tmp_path):
     out = tmp_path / "killed.zarr"
-    cmd = [sys.executable, "-c", "import sys; from napari_ssdpc.cli import main; sys.exit(main(sys.argv[1:]))"]
+    cmd = [sys.executable, "-c", "import sys; from napari_ssdpc.cli.main import main; sys.exit(main(sys.argv[1:]))"]
     proc = subprocess.Popen(cmd + _args(files, out) + ["--save", "phase,dpc"], stderr=subprocess.DEVNULL)
     try:
         deadline = time.monotonic() + 300
@@ -118,18 +128,18 @@ def test_killed_run_leaves_a_readable_store_and_resumes(serial, files, tmp_path)
             if (out / "ssdpc_done").is_dir() and len(done_frames(out)) >= 1:
                 break
             time.sleep(0.02)
-        os.kill(proc.pid, signal.SIGKILL)           # no clean-up at all
+        os.kill(proc.pid, signal.SIGKILL)  # no clean-up at all
     finally:
         proc.wait()
     done = list(done_frames(out))
     assert 1 <= len(done) < 6, "the run was not interrupted mid-way"
     ref = _arrays(serial)
-    got = _arrays(out)                              # every chunk reads: nothing is corrupt
+    got = _arrays(out)  # every chunk reads: nothing is corrupt
     for t in range(6):
         for n in ref:
             if t in done:
                 np.testing.assert_array_equal(got[n][t], ref[n][t])
-            else:                                   # not yet written (NaN) or written but not marked
+            else:  # not yet written (NaN) or written but not marked
                 assert np.all(np.isnan(got[n][t])) or np.array_equal(got[n][t], ref[n][t])
     assert main(_args(files, out) + ["--save", "phase,dpc"]) == 0
     assert list(done_frames(out)) == list(range(6))
@@ -169,7 +179,18 @@ def test_series_bad_input(files, recipe, data, tmp_path, capsys):
         assert main(_args(files, tmp_path / "gpu.zarr") + ["--device", "gpu"]) == 2
         err = capsys.readouterr().err
         assert "--device gpu" in err and err.count("\n") == 1 and not (tmp_path / "gpu.zarr").exists()
-    assert main(["reconstruct", str(tmp_path / "missing.tif"), "--calibration", str(files / "cal.json"),
-                 "-o", str(tmp_path / "m.zarr")]) == 2
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(tmp_path / "missing.tif"),
+                "--calibration",
+                str(files / "cal.json"),
+                "-o",
+                str(tmp_path / "m.zarr"),
+            ]
+        )
+        == 2
+    )
     assert "file not found" in capsys.readouterr().err
     assert not (tmp_path / "m.zarr").exists()

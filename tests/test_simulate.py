@@ -13,14 +13,33 @@ import time
 import numpy as np
 import pytest
 
-from napari_ssdpc.core.camera import Camera
-from napari_ssdpc.core.errors import SsdpcError
-from napari_ssdpc.core.grid import Grid
-from napari_ssdpc.core.optics import Optics
-from napari_ssdpc.core.phantoms import (Box, Composite, Sphere, Spheres, bar_target, cell, moving_sample,
-                                        pmma_bead, two_beads)
-from napari_ssdpc.core.simulate import (Sampling, Source, effective_tan_theta, exit_field, flat_frame,
-                                        flat_intensity, propagate, simulate, white_frame, white_intensity)
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.physics.lattice import Grid
+from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.simulation.camera import Camera
+from napari_ssdpc.simulation.phantoms import (
+    Box,
+    Composite,
+    Sphere,
+    Spheres,
+    bar_target,
+    cell,
+    moving_sample,
+    pmma_bead,
+    two_beads,
+)
+from napari_ssdpc.simulation.simulate import (
+    Sampling,
+    Source,
+    effective_tan_theta,
+    exit_field,
+    flat_frame,
+    flat_intensity,
+    propagate,
+    simulate,
+    white_frame,
+    white_intensity,
+)
 
 CLEAN = Camera(noise=False, falloff=0.0)
 
@@ -44,7 +63,7 @@ def _centroid(img, start, optics, r0_um, r1_um, iters=8):
     """Centroid of |img| in a disk, re-centred on the previous estimate."""
     p = np.asarray(start, float)
     c = np.rint(p).astype(int)
-    Y, X = np.mgrid[c[1] - 50:c[1] + 51, c[0] - 50:c[0] + 51]
+    Y, X = np.mgrid[c[1] - 50 : c[1] + 51, c[0] - 50 : c[0] + 51]
     w0 = np.abs(img[Y, X])
     for r in [r0_um] + [r1_um] * iters:
         w = w0 * (np.hypot(X - p[0], Y - p[1]) <= r / _obj_px(optics))
@@ -58,12 +77,12 @@ def test_camera_dark_offset_noise_and_saturation():
     dark = cam.apply(np.zeros((400, 400)))
     assert dark.dtype == np.uint16
     assert abs(dark.mean() - 100.0) < 0.01
-    assert abs(dark.std() - math.sqrt((2.5 * 0.25) ** 2 + 1 / 12)) < 0.01   # read noise + rounding, ADU
+    assert abs(dark.std() - math.sqrt((2.5 * 0.25) ** 2 + 1 / 12)) < 0.01  # read noise + rounding, ADU
     half = cam.apply(np.full((400, 400), 0.5)).astype(float)
     assert abs(half.mean() - (100 + 0.5 * 12000 * 0.25)) < 0.2
-    expect_std = math.sqrt(0.25 ** 2 * (0.5 * 12000 + 2.5 ** 2) + 1 / 12)   # shot + read noise + rounding
+    expect_std = math.sqrt(0.25**2 * (0.5 * 12000 + 2.5**2) + 1 / 12)  # shot + read noise + rounding
     assert abs(half.std() / expect_std - 1) < 0.02
-    sat = cam.apply(np.full((50, 50), 1.4))                           # 16800 e-: above the ADC range
+    sat = cam.apply(np.full((50, 50), 1.4))  # 16800 e-: above the ADC range
     assert np.all(sat == 4095)
     well = Camera(noise=False, full_well_e=10000.0).apply(np.array([0.8, 2.0]))
     assert list(well) == [round(0.8 * 12000 * 0.25 + 100), round(10000 * 0.25 + 100)]
@@ -94,7 +113,7 @@ def test_white_frame_edge_brightness_is_exact_overlap(offset_px):
     for ln in lens:
         c = g.lattice_px(ln.row, ln.col)
         ix, iy = int(round(c[0])), int(round(c[1]))
-        val = img[iy - 1:iy + 1 + 1, ix - 1:ix + 2].mean()          # 3x3 px at the EI centre
+        val = img[iy - 1 : iy + 1 + 1, ix - 1 : ix + 2].mean()  # 3x3 px at the EI centre
         ref = _overlap_fraction_mc(ln.u, o.subaperture_radius, o.cutoff)
         errs.append(val - ref)
     errs = np.abs(errs)
@@ -104,7 +123,7 @@ def test_white_frame_edge_brightness_is_exact_overlap(offset_px):
     ln = min((ln for ln in lens if ln.fraction > 0.5), key=lambda ln: (ln.row, -ln.fraction))
     c = g.lattice_px(ln.row, ln.col)
     col = img[:, int(round(c[0]))]
-    y = c[1] - np.arange(len(col))                                 # distance above the centre
+    y = c[1] - np.arange(len(col))  # distance above the centre
     up = (y > 40) & (y < 100)
     r_half = np.interp(-0.5 * ln.fraction, -col[up][::-1], y[up][::-1])
     assert abs(r_half - o.ei_radius_px) < 0.5, r_half
@@ -121,11 +140,11 @@ def test_white_frame_raw_and_falloff():
     r_px = 0.8 * o.field_radius_um / _obj_px(o)
     centre = img[int(round(c[1])), int(round(c[0]))]
     edge = img[int(round(c[1])), int(round(c[0] + r_px))]
-    assert abs(edge / centre - (1 - 0.15 * 0.8 ** 2)) < 5e-3
+    assert abs(edge / centre - (1 - 0.15 * 0.8**2)) < 5e-3
 
 
 def test_flat_frame_lights_only_central_lenslets():
-    o = Optics.paper()                                             # σ = 0.25
+    o = Optics.paper()  # σ = 0.25
     g = Grid.nominal(o)
     cam = Camera(noise=False, falloff=0.0)
     raw = flat_frame(o, g, camera=cam)
@@ -134,7 +153,7 @@ def test_flat_frame_lights_only_central_lenslets():
     lit, dark = [], []
     for ln in g.lenslets(o):
         c = np.rint(g.lattice_px(ln.row, ln.col)).astype(int)
-        v = img[c[1] - 2:c[1] + 3, c[0] - 2:c[0] + 3].mean()
+        v = img[c[1] - 2 : c[1] + 3, c[0] - 2 : c[0] + 3].mean()
         (lit if max(abs(ln.a_um[0]), abs(ln.a_um[1])) < o.pitch_um else dark).append(v)
     assert len(lit) == 4 and len(dark) == 28
     # partly lit: source ∩ sub-aperture is 48.1 % of the sub-aperture (0.472 simulated)
@@ -148,11 +167,11 @@ def test_flat_field_cancels_unscattered_light(small, small_flat):
     sim = simulate(Sphere((8.0, -5.0, 0.0), 3.0, 1.518 + 0.01j, medium_index=1.518), small, camera=CLEAN)
     g, s = sim.grid, _obj_px(small)
     c = g.lattice_px(0, 0)
-    Y, X = np.mgrid[int(c[1]) - 40:int(c[1]) + 41, int(c[0]) - 40:int(c[0]) + 41]
+    Y, X = np.mgrid[int(c[1]) - 40 : int(c[1]) + 41, int(c[0]) - 40 : int(c[0]) + 41]
     ox, oy = (X - c[0]) * s, (Y - c[1]) * s
     far = (np.hypot(ox - 8.0, oy + 5.0) > 20.0) & (np.hypot(ox, oy) < 20.0)
     ratio = sim.intensity[Y, X][far] / small_flat[Y, X][far]
-    assert np.abs(ratio - 1).max() < 2e-4                        # measured 7e-5
+    assert np.abs(ratio - 1).max() < 2e-4  # measured 7e-5
 
 
 # --------------------------------------------------------------------------- physics
@@ -161,14 +180,14 @@ def test_propagator_conserves_energy(tilt):
     n, dx = 256, 0.3
     x = (np.arange(n) - n / 2) * dx
     X, Y = np.meshgrid(x, x)
-    f = (np.exp(-(X ** 2 + Y ** 2) / (2 * 3.0 ** 2)) * np.exp(2j * np.pi * 0.3 * X)).astype(np.complex64)
+    f = (np.exp(-(X**2 + Y**2) / (2 * 3.0**2)) * np.exp(2j * np.pi * 0.3 * X)).astype(np.complex64)
     e0 = np.sum(np.abs(f.astype(np.complex128)) ** 2)
     for d in (50.0, -30.0):
         g = propagate(f, d, dx, 0.52, 1.518, tilt)
         assert g.dtype == np.complex64
         e1 = np.sum(np.abs(g.astype(np.complex128)) ** 2)
         assert abs(e1 - e0) / e0 < 1e-6
-        assert np.abs(g - f).max() > 0.1                         # it did propagate
+        assert np.abs(g - f).max() > 0.1  # it did propagate
 
 
 def test_propagator_defocus_matches_gaussian_beam():
@@ -176,11 +195,11 @@ def test_propagator_defocus_matches_gaussian_beam():
     n, dx, lam, nm, w0 = 512, 0.25, 0.52, 1.518, 1.5
     x = (np.arange(n) - n / 2) * dx
     X, Y = np.meshgrid(x, x)
-    f = np.exp(-(X ** 2 + Y ** 2) / w0 ** 2).astype(np.complex128)
+    f = np.exp(-(X**2 + Y**2) / w0**2).astype(np.complex128)
     z = 20.0
     g = np.abs(propagate(f, z, dx, lam, nm)) ** 2
-    w_meas = 2 * math.sqrt((g * X ** 2).sum() / g.sum())       # 1/e² radius from the 2nd moment
-    zr = math.pi * w0 ** 2 * nm / lam
+    w_meas = 2 * math.sqrt((g * X**2).sum() / g.sum())  # 1/e² radius from the 2nd moment
+    zr = math.pi * w0**2 * nm / lam
     assert abs(w_meas / (w0 * math.sqrt(1 + (z / zr) ** 2)) - 1) < 0.02
 
 
@@ -190,11 +209,11 @@ def test_thin_phase_plate_phase(tilt):
     t, dn = 1.0, 0.01 + 0.002j
     plate = Composite((Box((0.0, 0.0, 0.0), (40.0, 40.0, t), dn),), medium_index=1.518)
     v, z_exit, samp = exit_field(plate, o, tilt=tilt)
-    phase = np.angle(v[0, 0])                                     # x = y = 0 (FFT order)
-    expect = 2 * math.pi * dn.real * t / o.wavelength_um           # 0.1208 rad
+    phase = np.angle(v[0, 0])  # x = y = 0 (FFT order)
+    expect = 2 * math.pi * dn.real * t / o.wavelength_um  # 0.1208 rad
     assert abs(phase / expect - 1) < 1e-3, phase
     assert abs(abs(v[0, 0]) / math.exp(-2 * math.pi * dn.imag * t / o.wavelength_um) - 1) < 1e-4
-    assert abs(v[samp.n // 2, samp.n // 2] - 1) < 1e-6              # far outside: unperturbed
+    assert abs(v[samp.n // 2, samp.n // 2] - 1) < 1e-6  # far outside: unperturbed
 
 
 def test_abcd_lens_train_sign_and_upright_ei():
@@ -209,7 +228,7 @@ def test_abcd_lens_train_sign_and_upright_ei():
 
     f_obj, f_tube, f_fl, f_ml = o.f_obj_um, o.tube_lens_mm * 1e3, o.fourier_lens_mm * 1e3, o.mla_focal_length_mm * 1e3
     to_mla = P(f_fl) @ L(f_fl) @ P(f_fl) @ P(f_tube) @ L(f_tube) @ P(f_tube) @ P(f_obj) @ L(f_obj) @ P(f_obj)
-    for na in (0.05, -0.12, 0.3):                                # reduced angle n sinθ = λ u
+    for na in (0.05, -0.12, 0.3):  # reduced angle n sinθ = λ u
         a, _ = to_mla @ np.array([0.0, na])
         u = na / o.wavelength_um
         assert math.isclose(float(o.mla_to_frequency(a)), u, rel_tol=1e-9)
@@ -219,10 +238,10 @@ def test_abcd_lens_train_sign_and_upright_ei():
     hits = []
     for na in np.linspace(-0.02, 0.02, 5):
         y = to_mla @ np.array([x0, na - a_c / (f_obj * o.m_r)])
-        y = P(f_ml) @ (L(f_ml) @ np.array([y[0] - a_c, y[1]]))   # lenslet about its own centre
+        y = P(f_ml) @ (L(f_ml) @ np.array([y[0] - a_c, y[1]]))  # lenslet about its own centre
         hits.append(y[0])
-    assert np.ptp(hits) < 1e-9                                     # imaged (sensor at the MLA focus)
-    assert math.isclose(hits[0], x0 * o.m_ei, rel_tol=1e-9)        # upright, magnification M_EI
+    assert np.ptp(hits) < 1e-9  # imaged (sensor at the MLA focus)
+    assert math.isclose(hits[0], x0 * o.m_ei, rel_tol=1e-9)  # upright, magnification M_EI
 
 
 def test_effective_tan_theta_is_below_centre_for_clipped_lenslets():
@@ -230,11 +249,11 @@ def test_effective_tan_theta_is_below_centre_for_clipped_lenslets():
     for ln in o.lenslets():
         ratio = np.linalg.norm(effective_tan_theta(o, ln)) / o.tan_theta(np.array(ln.u))[0]
         if ln.fraction < 0.6:
-            assert 0.92 < ratio < 0.95                             # ~6 % below the centre value
+            assert 0.92 < ratio < 0.95  # ~6 % below the centre value
         if ln.fraction == 1.0:
             assert abs(ratio - 1) < 2e-3
         t = effective_tan_theta(o, ln)
-        assert np.dot(t, ln.u) > 0                                 # along u_k, i.e. against a
+        assert np.dot(t, ln.u) > 0  # along u_k, i.e. against a
 
 
 def test_in_focus_positions_follow_grid_matrix(small, small_flat):
@@ -246,7 +265,7 @@ def test_in_focus_positions_follow_grid_matrix(small, small_flat):
     for ln in sim.lenslets:
         exp = g.object_to_sensor(ln, (8.0, -5.0), small)
         errs.append(np.linalg.norm(_centroid(sim.intensity - flat, exp, small, 8.0, 8.0) - exp))
-    assert max(errs) < 0.3, max(errs)                              # measured 0.14 px
+    assert max(errs) < 0.3, max(errs)  # measured 0.14 px
 
 
 def _df_weighted_tan(optics, ln, radius_um, kappa, d=0.006):
@@ -254,20 +273,21 @@ def _df_weighted_tan(optics, ln, radius_um, kappa, d=0.006):
     z times the mean of tanθ(u)·û(u) over u ∈ A_k and w ∈ source, weighted by |O(u − w)|²,
     O = 2D spectrum of the bead's projected amplitude change (first-moment theorem)."""
     from scipy import special
+
     lam, nm = optics.wavelength_um, optics.medium_index
     r = np.linspace(0.0, radius_um, 1500)
-    ob = 1 - np.exp(-4 * np.pi * kappa * np.sqrt(radius_um ** 2 - r ** 2) / lam)
+    ob = 1 - np.exp(-4 * np.pi * kappa * np.sqrt(radius_um**2 - r**2) / lam)
     fr = np.linspace(0.0, 2.0, 801)
     spec = np.trapezoid(ob[None, :] * special.j0(2 * np.pi * fr[:, None] * r[None, :]) * r[None, :], r, axis=1)
     g = np.arange(-1.0, 1.0, d)
     wx, wy = np.meshgrid(g, g)
-    src = wx ** 2 + wy ** 2 <= optics.source_radius ** 2
+    src = wx**2 + wy**2 <= optics.source_radius**2
     wx, wy = wx[src], wy[src]
     rho, cut = optics.subaperture_radius, optics.cutoff
     ux, uy = np.meshgrid(ln.u[0] + np.arange(-rho, rho, d), ln.u[1] + np.arange(-rho, rho, d))
-    a = ((ux - ln.u[0]) ** 2 + (uy - ln.u[1]) ** 2 <= rho * rho) & (ux ** 2 + uy ** 2 <= cut * cut)
+    a = ((ux - ln.u[0]) ** 2 + (uy - ln.u[1]) ** 2 <= rho * rho) & (ux**2 + uy**2 <= cut * cut)
     ux, uy = ux[a], uy[a]
-    k = lam / nm / np.sqrt(1 - (lam / nm) ** 2 * (ux ** 2 + uy ** 2))
+    k = lam / nm / np.sqrt(1 - (lam / nm) ** 2 * (ux**2 + uy**2))
     wgt = (np.interp(np.hypot(ux[:, None] - wx[None, :], uy[:, None] - wy[None, :]), fr, spec) ** 2).sum(axis=1)
     return np.array([np.sum(wgt * k * ux), np.sum(wgt * k * uy)]) / wgt.sum()
 
@@ -288,11 +308,11 @@ def test_defocused_bead_parallax(small, small_flat):
             report[(z, ln.row, ln.col)] = (ln, meas, expect, centre_value)
     # the brief's prediction, pupil-weighted <tanθ>_k, for the 16 outer EIs (|u_k| > 0.6 cycles/µm)
     outer = [k for k, v in report.items() if np.linalg.norm(v[0].u) > 0.6]
-    assert len(outer) == 32                                       # 16 outer EIs x 2 depths
+    assert len(outer) == 32  # 16 outer EIs x 2 depths
     for k in outer:
         ln, meas, expect, centre_value = report[k]
-        assert np.linalg.norm(meas - expect) < 0.3, (k, meas, expect)     # measured <= 0.20 px
-        if ln.fraction < 0.6:   # clipped EIs: the pupil-weighted value, not the centre value
+        assert np.linalg.norm(meas - expect) < 0.3, (k, meas, expect)  # measured <= 0.20 px
+        if ln.fraction < 0.6:  # clipped EIs: the pupil-weighted value, not the centre value
             assert np.linalg.norm(meas - expect) < 0.5 * np.linalg.norm(meas - centre_value)
     # every EI: the bead moves toward the optical axis for z > 0, away for z < 0
     for (z, _, _), (ln, meas, _, _) in report.items():
@@ -301,7 +321,7 @@ def test_defocused_bead_parallax(small, small_flat):
     for (z, row, col), (ln, meas, _, _) in report.items():
         if row >= 0 and col >= 0 and max(abs(ln.a_um[0]), abs(ln.a_um[1])) > o.pitch_um:
             pred = z * _df_weighted_tan(o, ln, radius, kappa) / s
-            assert np.linalg.norm(meas - pred) < 0.2, ((z, row, col), meas, pred)   # measured <= 0.14 px
+            assert np.linalg.norm(meas - pred) < 0.2, ((z, row, col), meas, pred)  # measured <= 0.14 px
 
 
 def test_source_sampling_converges(small):
@@ -341,13 +361,13 @@ def test_sphere_partial_volume_matches_analytic_volume():
     z = np.arange(-8.0, 8.01, 0.5)
     vol = b.volume(z, x, x)
     total = vol.sum() * 0.4 * 0.4 * 0.5
-    expect = (1.49 - 1.518) * 4 / 3 * math.pi * 6.5 ** 3
+    expect = (1.49 - 1.518) * 4 / 3 * math.pi * 6.5**3
     assert abs(total / expect - 1) < 2e-3
     assert abs(vol[len(z) // 2, len(x) // 2, len(x) // 2] - (1.49 - 1.518)) < 1e-12
     assert b.delta_n(0.0, 0.0, 6.4) == pytest.approx(1.49 - 1.518)
     assert b.delta_n(0.0, 0.0, 6.6) == 0
     edge = vol[len(z) // 2, len(x) // 2]
-    assert np.any((np.abs(edge) > 0) & (np.abs(edge) < 0.99 * 0.028))     # partial-volume rim
+    assert np.any((np.abs(edge) > 0) & (np.abs(edge) < 0.99 * 0.028))  # partial-volume rim
 
 
 def test_phantom_catalogue():
@@ -363,16 +383,16 @@ def test_phantom_catalogue():
     assert c.delta_n(cz, cy, cx - 10.0) == pytest.approx(1.37 - 1.33)
     t = bar_target(period_um=4.38, z_um=40.0)
     xy = np.arange(-20, 20, 0.1)
-    proj = t.slab(39.0, 41.0, xy, xy, 0.1)                         # ∫ Δn dz through the target
+    proj = t.slab(39.0, 41.0, xy, xy, 0.1)  # ∫ Δn dz through the target
     # bars transmit 10 % of the intensity
     assert math.isclose(math.exp(-4 * math.pi * proj.imag.max() / 0.52), 0.1, rel_tol=1e-6)
-    covered = proj.imag.sum() * 0.01 / proj.imag.max()             # exact partial-pixel areas
-    assert abs(covered - 6 * 2.19 * 10.95) < 1e-6                  # 6 bars of 2.19 x 10.95 µm
+    covered = proj.imag.sum() * 0.01 / proj.imag.max()  # exact partial-pixel areas
+    assert abs(covered - 6 * 2.19 * 10.95) < 1e-6  # 6 bars of 2.19 x 10.95 µm
     frames = moving_sample(5)
     xs = [f.center_um[0] for f in frames]
     assert len(frames) == 5 and xs[0] == -35.0 and xs[-1] == 35.0 and np.all(np.diff(xs) > 0)
     with pytest.raises(SsdpcError):
-        Sphere().delta_n(0, 0, 0)                                  # no medium bound
+        Sphere().delta_n(0, 0, 0)  # no medium bound
     assert Sphere().delta_n(0, 0, 0, medium_index=1.518) == pytest.approx(1.49 - 1.518)
     assert isinstance(Spheres([Sphere()]).spheres, tuple)
 

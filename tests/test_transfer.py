@@ -5,10 +5,9 @@ import numpy as np
 import pytest
 import scipy.fft as sfft
 
-from napari_ssdpc.core.errors import SsdpcWarning
-from napari_ssdpc.core.optics import Optics, circle_overlap_fraction
-from napari_ssdpc.core.psf import axial_frequency
-from napari_ssdpc.core.transfer import (
+from napari_ssdpc.errors import SsdpcWarning
+from napari_ssdpc.physics.psf import axial_frequency
+from napari_ssdpc.physics.transfer import (
     dpc_from_halves,
     dpc_transfer_functions,
     lenslet_case,
@@ -16,6 +15,7 @@ from napari_ssdpc.core.transfer import (
     paper_transfer_functions,
     weak_object_transfer_functions,
 )
+from napari_ssdpc.settings.optics import Optics, circle_overlap_fraction
 
 
 @pytest.fixture(scope="module")
@@ -46,7 +46,7 @@ def test_symmetric_full_disk(optics):
     h_abs, h_phase = weak_object_transfer_functions(source, pupil)
     assert h_abs[0, 0].real == pytest.approx(2.0, abs=1e-9)
     assert np.abs(h_abs.imag).max() < 1e-9
-    assert np.abs(h_phase).max() < 1e-9                      # symmetric S and P: no phase contrast
+    assert np.abs(h_phase).max() < 1e-9  # symmetric S and P: no phase contrast
 
 
 def test_half_source_phase_tf_is_imaginary_and_odd(optics):
@@ -59,7 +59,7 @@ def test_half_source_phase_tf_is_imaginary_and_odd(optics):
     # with defocus it stays Hermitian (a real phase gives a real image)
     hz = paper_transfer_functions(optics, (97, 97), optics.object_pixel_um, 20.0)["left"][1]
     assert np.abs(hz - np.conj(_negate(hz))).max() < 1e-6 * np.abs(hz).max()
-    assert np.abs(hz.real).max() > 0.05 * np.abs(hz).max()   # defocus adds an even real part
+    assert np.abs(hz.real).max() > 0.05 * np.abs(hz).max()  # defocus adds an even real part
 
 
 def _direct_wotf(optics, ln, u, z, step=5e-4):
@@ -80,13 +80,15 @@ def _direct_wotf(optics, ln, u, z, step=5e-4):
 
 @pytest.mark.parametrize("z", [0.0, 40.0])
 def test_fft_wotf_matches_direct_integral(optics, z):
-    ln = _lenslet(optics, -1, -1)                             # straddles the source edge
+    ln = _lenslet(optics, -1, -1)  # straddles the source edge
     shape, pix = (145, 145), optics.object_pixel_um
     du = 1.0 / (shape[0] * pix)
     h_abs, h_phase, i0 = lenslet_transfer_functions(optics, [ln], shape, pix, z)
     d = np.hypot(*ln.u)
-    exact_i0 = circle_overlap_fraction(d, optics.subaperture_radius, optics.source_radius) * (
-        optics.subaperture_radius / optics.source_radius) ** 2
+    exact_i0 = (
+        circle_overlap_fraction(d, optics.subaperture_radius, optics.source_radius)
+        * (optics.subaperture_radius / optics.source_radius) ** 2
+    )
     assert i0[0] == pytest.approx(exact_i0, rel=2e-3)
     peak = np.abs(h_phase[0]).max()
     for m in [(3, 0), (0, 6), (5, -9), (-12, 4), (20, 7)]:
@@ -98,7 +100,7 @@ def test_fft_wotf_matches_direct_integral(optics, z):
 
 
 def test_three_lenslet_cases(optics):
-    o = optics.replace(condenser_na=0.25)                     # source radius 0.48 cycles/µm
+    o = optics.replace(condenser_na=0.25)  # source radius 0.48 cycles/µm
     inside, straddling, outside = _lenslet(o, -1, -1), _lenslet(o, -1, 1), _lenslet(o, -3, -1)
     assert [lenslet_case(o, ln) for ln in (inside, straddling, outside)] == ["inside", "straddling", "outside"]
     h_abs, h_phase, i0 = lenslet_transfer_functions(o, [inside, straddling, outside], (145, 145), o.object_pixel_um)
@@ -117,11 +119,11 @@ def test_three_lenslet_cases(optics):
     ha, hz, _ = lenslet_transfer_functions(o, [inside, straddling], (145, 145), o.object_pixel_um, 30.0)
     assert np.abs(hz[0]).max() < 1e-6 * i0[0]
     assert np.abs(ha[0]).max() == pytest.approx(2 * i0[0], rel=1e-3)
-    assert np.abs(hz[1].real).max() > 0.05 * i0[1]           # straddling: defocus adds an even part
+    assert np.abs(hz[1].real).max() > 0.05 * i0[1]  # straddling: defocus adds an even part
 
 
 def _with_condenser(optics, na_c):
-    if na_c > 0.8 * optics.na:                                # Optics itself warns above 0.8 NA
+    if na_c > 0.8 * optics.na:  # Optics itself warns above 0.8 NA
         with pytest.warns(SsdpcWarning, match="above 0.8"):
             return optics.replace(condenser_na=na_c)
     return optics.replace(condenser_na=na_c)
@@ -151,8 +153,13 @@ def test_dpc_tf_is_one_half_over_its_own_background(optics):
     np.testing.assert_allclose(d["dpc_phase"]["ud"], d["H_phase"]["up"] / d["I0"]["up"], atol=1e-6)
     # at the paper's NA_c = 0.1 only the 4 central lenslets are lit; each half collects 42.7%
     total = sum(d["I0"][h] for h in ("up", "down"))
-    exact = 4 * circle_overlap_fraction(np.hypot(*_lenslet(optics, -1, -1).u), optics.subaperture_radius,
-                                        optics.source_radius) * (optics.subaperture_radius / optics.source_radius) ** 2
+    exact = (
+        4
+        * circle_overlap_fraction(
+            np.hypot(*_lenslet(optics, -1, -1).u), optics.subaperture_radius, optics.source_radius
+        )
+        * (optics.subaperture_radius / optics.source_radius) ** 2
+    )
     assert total == pytest.approx(exact, rel=2e-3)
     zs = dpc_transfer_functions(optics, z_um=[-30.0, 0.0, 30.0])
     assert zs["dpc_phase"]["lr"].shape == (3, 145, 145)
@@ -169,7 +176,7 @@ def _abbe_images(optics, obj, dx, sources, pupils, halves, z, norm):
     defocus = np.exp(2j * np.pi * z * axial_frequency(ux, uy, optics))
     out = {h: np.zeros((n, n)) for h in set(halves.values())}
     for k, (s, p) in enumerate(zip(sources, pupils)):
-        jy, jx = np.nonzero(s * p)    # a blocked direct beam gives dark field: second order, left out
+        jy, jx = np.nonzero(s * p)  # a blocked direct beam gives dark field: second order, left out
         for y, x in zip(jy, jx):
             field = sfft.ifft2(np.roll(spec, (y, x), axis=(0, 1)) * p * defocus)
             out[halves[k]] += s[y, x] * np.abs(field) ** 2
@@ -181,7 +188,7 @@ def _abbe_images(optics, obj, dx, sources, pupils, halves, z, norm):
 def test_first_order_model_matches_abbe_simulation(optics, model, z):
     """(I_up − I_down)/(I_up + I_down) of a weak object, simulated source point by source point,
     equals F⁻¹[H_DPC,phase φ̃ − H_DPC,abs μ̃] (sign conventions of the module docstring)."""
-    n, m = 128, 8                     # du = 0.128205/m puts every u_k on the frequency grid
+    n, m = 128, 8  # du = 0.128205/m puts every u_k on the frequency grid
     du = 1.0 / (optics.wavelength_um * optics.f_obj_um * optics.m_r) * optics.lenslet_radius_um / m
     dx = 1.0 / (n * du)
     ux, uy = _grid(n, du)
@@ -190,8 +197,10 @@ def test_first_order_model_matches_abbe_simulation(optics, model, z):
     objective = r <= optics.cutoff
     if model == "lenslet":
         lens = [ln for ln in optics.lenslets() if lenslet_case(optics, ln) != "outside" and ln.a_um[1] != 0]
-        pupils = [(objective & (np.hypot(ux - ln.u[0], uy - ln.u[1]) <= optics.subaperture_radius)).astype(float)
-                  for ln in lens]
+        pupils = [
+            (objective & (np.hypot(ux - ln.u[0], uy - ln.u[1]) <= optics.subaperture_radius)).astype(float)
+            for ln in lens
+        ]
         halves = {k: ("up" if ln.a_um[1] < 0 else "down") for k, ln in enumerate(lens)}
         sources = [source] * len(lens)
     else:
@@ -214,12 +223,12 @@ def test_first_order_model_matches_abbe_simulation(optics, model, z):
     h_dpc_abs = dpc_from_halves(tf["up"][0], tf["down"][0], tf["up"][2], tf["down"][2])
     h_dpc_phase = dpc_from_halves(tf["up"][1], tf["down"][1], tf["up"][2], tf["down"][2])
     pred = sfft.ifft2(h_dpc_phase * sfft.fft2(phi) - h_dpc_abs * sfft.fft2(mu)).real
-    assert np.abs(pred).max() > 1e-4                          # a real signal, not two zeros
+    assert np.abs(pred).max() > 1e-4  # a real signal, not two zeros
     assert np.linalg.norm(dpc_sim - pred) / np.linalg.norm(dpc_sim) < 0.01
 
 
 def test_bad_input(optics):
-    from napari_ssdpc.core.errors import SsdpcError
+    from napari_ssdpc.errors import SsdpcError
 
     with pytest.raises(SsdpcError, match="share one 2D"):
         weak_object_transfer_functions(np.ones((8, 8)), np.ones((8, 9)))
@@ -231,5 +240,5 @@ def test_bad_input(optics):
         dpc_transfer_functions(optics, model="tian")
     with pytest.raises(SsdpcError, match="condenser_na is 0"):
         dpc_transfer_functions(optics.replace(condenser_na=0.0))
-    with pytest.raises(SsdpcError, match="no direct light"):   # source inside the gap at the vertex
+    with pytest.raises(SsdpcError, match="no direct light"):  # source inside the gap at the vertex
         dpc_transfer_functions(optics.replace(condenser_na=0.02))

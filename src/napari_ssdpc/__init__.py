@@ -7,7 +7,7 @@ try:
 except PackageNotFoundError:  # running from a source tree
     __version__ = "0.0.0"
 
-from .core.errors import SsdpcError, SsdpcWarning
-from .core.optics import Optics
+from napari_ssdpc.errors import SsdpcError, SsdpcWarning
+from napari_ssdpc.settings.optics import Optics
 
 __all__ = ["Optics", "SsdpcError", "SsdpcWarning", "__version__"]

@@ -1,0 +1,371 @@
+"""napari readers: raw light-field frames, calibration JSON, reconstruction outputs.
+
+Each ``get_*_reader(path)`` looks inside the file and returns None when it is not its own, so
+napari can try another reader. The layer-building helpers (``calibration_layers``,
+``result_layer``) are shared with the widgets, so a file opened from disk looks exactly like a
+freshly computed result.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from napari_ssdpc.errors import SsdpcError
+
+RESULT_FORMAT = "napari-ssdpc-result"
+RESULT_VERSION = 1
+MIN_FRAME_PX = 32  # smaller images are not light-field frames
+MAX_JSON_BYTES = 50_000_000
+
+# quantity -> (layer name suffix, colormap, unit, centred on the medium / zero)
+QUANTITIES = {
+    "ri": ("RI", "RdBu_r", "refractive index", True),
+    "delta_n": ("Δn", "RdBu_r", "refractive-index difference", True),
+    "phase": ("phase", "RdBu_r", "rad per slice", True),
+    "absorption": ("absorption", "gray", "absorption per slice", True),
+    "dpc_ud": ("DPC up-down", "gray", "DPC ratio", True),
+    "dpc_lr": ("DPC left-right", "gray", "DPC ratio", True),
+    "stack_up": ("stack up", "gray", "intensity", False),
+    "stack_down": ("stack down", "gray", "intensity", False),
+    "stack_left": ("stack left", "gray", "intensity", False),
+    "stack_right": ("stack right", "gray", "intensity", False),
+    "psf": ("PSF", "magma", "fraction of one lenslet's light per pixel", False),
+}
+
+
+def _stem(p: Path) -> str:
+    """File name without its data suffix (.ome.tif, .tif, .zarr, .json, ...)."""
+    name = p.name
+    for ext in (".ome.tiff", ".ome.tif", ".tiff", ".tif", ".zarr", ".json"):
+        if name.lower().endswith(ext):
+            return name[: -len(ext)]
+    return p.stem
+
+
+def _path(path):
+    """A single file path, or None (napari may pass a list of paths)."""
+    if isinstance(path, (list, tuple)):
+        return None
+    return Path(path) if isinstance(path, (str, Path)) else None
+
+
+# =========================================================================== raw frames
+def get_raw_reader(path):
+    """Reader for raw light-field frames: a 2D frame or a (t, y, x) series in a TIFF/OME-TIFF."""
+    p = _path(path)
+    if p is None or p.suffix.lower() not in (".tif", ".tiff") or not p.is_file():
+        return None
+    try:
+        ok = _is_raw_tiff(p)
+    except Exception:  # not a TIFF tifffile can parse: not ours
+        return None
+    return read_raw if ok else None
+
+
+def _is_raw_tiff(p: Path) -> bool:
+    import tifffile
+
+    with tifffile.TiffFile(p) as tif:
+        if _our_description(tif) is not None:  # a reconstruction: the result reader's job
+            return False
+        s = tif.series[0]
+        dims = [(a, n) for a, n in zip(s.axes, s.shape) if n > 1]
+        if any(a in "SC" for a, _ in dims):  # RGB or multi-channel: a foreign image
+            return False
+        if len(dims) not in (2, 3) or np.dtype(s.dtype).kind not in "uif":
+            return False
+        if min(n for _, n in dims[-2:]) < MIN_FRAME_PX:
+            return False
+        if len(dims) == 3 and dims[0][0] == "Z" and tif.is_ome and "PhysicalSizeZ" in (tif.ome_metadata or ""):
+            return False  # a calibrated z-stack: a volume, not a series
+    return True
+
+
+def open_lazy(path, squeeze: bool = True):
+    """The data without reading the pixels: a numpy memmap where the file allows it (an
+    uncompressed TIFF), else a dask array over tifffile's zarr store. ``squeeze``: drop
+    length-1 axes."""
+    import tifffile
+
+    try:
+        data = tifffile.memmap(path, mode="r")
+    except Exception:  # compressed or tiled: go through the zarr store
+        import dask.array as da
+        import zarr
+
+        data = da.from_zarr(zarr.open(tifffile.imread(path, aszarr=True), mode="r"))
+    shape = tuple(n for n in data.shape if n > 1)
+    return data.reshape(shape) if squeeze and shape != data.shape else data
+
+
+def read_raw(path):
+    p = Path(path)
+    data = open_lazy(p)
+    first = np.asarray(data[0] if data.ndim == 3 else data)
+    lo, hi = np.percentile(first[::4, ::4], [1, 99.9])
+    kwargs = {
+        "name": _stem(p),
+        "contrast_limits": [float(lo), float(max(hi, lo + 1))],
+        "metadata": {"ssdpc": {"kind": "raw", "path": str(p)}},
+    }
+    if data.ndim == 3:
+        kwargs["axis_labels"] = ("t", "y", "x")
+    return [(data, kwargs, "image")]
+
+
+# ========================================================================== calibration
+def get_calibration_reader(path):
+    """Reader for our calibration JSON (``format: napari-ssdpc-calibration``)."""
+    p = _path(path)
+    if p is None or p.suffix.lower() != ".json" or not p.is_file() or p.stat().st_size > MAX_JSON_BYTES:
+        return None
+    from napari_ssdpc.calibration.calibrate import CALIBRATION_FORMAT
+
+    try:
+        d = json.loads(p.read_text())
+    except (ValueError, UnicodeDecodeError, OSError):
+        return None
+    if not isinstance(d, dict) or d.get("format") != CALIBRATION_FORMAT:
+        return None
+    return read_calibration
+
+
+def read_calibration(path):
+    from napari_ssdpc.calibration.calibrate import Calibration
+
+    p = Path(path)
+    cal = Calibration.from_json(p)
+    return calibration_layers(cal, _stem(p))
+
+
+def calibration_layers(cal, name: str) -> list:
+    """Layer data of a calibration: a Shapes layer of EI circles (green: at least half inside the
+    pupil, orange: clipped edge lenslets) and Points of the EI centres labelled (row, col), plus
+    the optical axis. Both carry the calibration dict in ``metadata['ssdpc']['calibration']``."""
+    d = cal.to_dict()
+    meta = {"ssdpc": {"kind": "calibration", "calibration": d}}
+    r = float(cal.ei_radius_px)
+    c = np.asarray(cal.centres_px, float)  # (K, 2) x, y
+    ellipses = [np.array([[cy - r, cx - r], [cy - r, cx + r], [cy + r, cx + r], [cy + r, cx - r]]) for cx, cy in c]
+    edge = ["lime" if ln.fraction >= 0.5 else "orange" for ln in cal.lenslets]
+    shapes = (
+        ellipses,
+        {
+            "name": f"{name} EI circles",
+            "shape_type": "ellipse",
+            "edge_color": edge,
+            "face_color": "transparent",
+            "edge_width": 2,
+            "metadata": meta,
+        },
+        "shapes",
+    )
+    ax, ay = cal.grid.axis_px
+    pts = np.vstack([c[:, ::-1], [[ay, ax]]])
+    labels = [f"({ln.row}, {ln.col})" for ln in cal.lenslets] + ["axis"]
+    points = (
+        pts,
+        {
+            "name": f"{name} EI centres",
+            "features": {"label": labels},
+            "text": {
+                "string": "{label}",
+                "color": "magenta",
+                "size": 10,
+                "anchor": "center",
+                "translation": [-0.45 * r, 0.0],
+            },
+            "symbol": ["disc"] * len(c) + ["cross"],
+            "size": [8] * len(c) + [30],
+            "face_color": ["lime"] * len(c) + ["red"],
+            "metadata": meta,
+        },
+        "points",
+    )
+    return [shapes, points]
+
+
+# ======================================================================= reconstructions
+# Our outputs carry a JSON description: in the OME-XML Description of an OME-TIFF, in the
+# ``napari_ssdpc`` attribute of an OME-Zarr image group. The writer of this plugin and the
+# ``ssdpc reconstruct`` command both write ``software: "napari-ssdpc <version>"``; an OME-Zarr
+# store holds one image group per quantity ("ri", "phase", "dpc", ...).
+CHANNELS = {"dpc": ["dpc_ud", "dpc_lr"], "stacks": ["stack_up", "stack_down", "stack_left", "stack_right"]}
+_WORDS = [
+    ("difference", "delta_n"),
+    ("refractive", "ri"),
+    ("phase", "phase"),
+    ("absorption", "absorption"),
+    ("dpc", "dpc"),
+    ("stack", "stacks"),
+]
+
+
+def get_result_reader(path):
+    """Reader for our reconstruction outputs: OME-TIFF (.ome.tif) or OME-Zarr (.zarr folder)."""
+    p = _path(path)
+    if p is None or not p.exists():
+        return None
+    try:
+        if p.is_dir() and p.suffix.lower() == ".zarr":
+            return read_result if _zarr_images(p) else None
+        if p.is_file() and p.suffix.lower() in (".tif", ".tiff"):
+            import tifffile
+
+            with tifffile.TiffFile(p) as tif:
+                return read_result if _our_description(tif) is not None else None
+    except Exception:  # unreadable or foreign: not ours
+        return None
+    return None
+
+
+def _is_ours(d) -> bool:
+    return isinstance(d, dict) and (
+        d.get("format") == RESULT_FORMAT or str(d.get("software", "")).startswith("napari-ssdpc")
+    )
+
+
+def _our_description(tif):
+    """Our JSON description from an OME-TIFF's OME-XML, or None."""
+    if not tif.is_ome:
+        return None
+    import tifffile
+
+    try:
+        desc = tifffile.xml2dict(tif.ome_metadata)["OME"]["Image"].get("Description")
+        d = json.loads(desc) if isinstance(desc, str) else None
+    except (KeyError, TypeError, ValueError, AttributeError):
+        return None
+    return d if _is_ours(d) else None
+
+
+def _zarr_images(p: Path) -> list:
+    """[(name, group)] of our OME-NGFF image groups: the root itself or its child groups."""
+    import zarr
+
+    root = zarr.open_group(str(p), mode="r")
+    groups = [(_stem(p), root)] + [(k, root[k]) for k in sorted(root.group_keys())]
+    return [(k, g) for k, g in groups if "multiscales" in g.attrs and _is_ours(dict(g.attrs).get("napari_ssdpc"))]
+
+
+def quantity_key(desc: dict, hint: str = "") -> str:
+    """Our quantity key ('ri', 'phase', 'dpc', ...) from a description, the image-group name or
+    the file-name suffix (OUT_phase.ome.tif), or the description's wording."""
+    for q in (desc.get("quantity"), hint):
+        if q in QUANTITIES or q in CHANNELS:
+            return q
+    text = str(desc.get("quantity", "")).lower()
+    return next((key for word, key in _WORDS if word in text), "ri")
+
+
+def read_result(path):
+    p = Path(path)
+    if p.is_dir():
+        return _read_zarr(p)
+    import tifffile
+
+    with tifffile.TiffFile(p) as tif:
+        desc = _our_description(tif)
+        axes = tif.series[0].axes
+        pixels = tifffile.xml2dict(tif.ome_metadata)["OME"]["Image"]["Pixels"]
+    data = open_lazy(p, squeeze=False)
+    voxel = tuple(float(pixels.get(f"PhysicalSize{a}", 1.0)) for a in "ZYX")
+    stem = _stem(p)
+    hint = stem.rsplit("_", 1)[-1] if "_" in stem else ""
+    q = quantity_key(desc, hint)
+    if q == hint or (hint == "n" and q == "delta_n"):  # OUT_phase.ome.tif, OUT_delta_n.ome.tif
+        stem = stem[: -len(q) - 1]
+    desc = {"name": stem, **desc, "quantity": q}
+    return _result_layers(data, axes.replace("Q", "").replace("I", "T"), desc, voxel)
+
+
+def _read_zarr(p: Path):
+    import dask.array as da
+
+    layers = []
+    for key, g in _zarr_images(p):
+        desc = dict(g.attrs["napari_ssdpc"])
+        ms = g.attrs["multiscales"][0]
+        ds = ms["datasets"][0]
+        data = da.from_zarr(g[ds["path"]])
+        axes = "".join(a["name"] for a in ms["axes"]).upper()
+        tr = {t["type"]: t[t["type"]] for t in ds["coordinateTransformations"]}
+        voxel = tuple(float(s) for a, s in zip(axes, tr["scale"]) if a in "ZYX")
+        if "translation" in tr and "origin_um" not in desc:
+            desc["origin_um"] = [float(s) for a, s in zip(axes, tr["translation"]) if a in "ZYX"]
+        desc = {"name": _stem(p), **desc, "quantity": quantity_key(desc, key)}
+        layers += _result_layers(data, axes, desc, voxel)
+    return layers
+
+
+def _origin(desc: dict, shape_zyx, voxel) -> tuple:
+    """The (z, y, x) µm position of voxel 0: stored, else z_min of the settings and the view
+    centred on the optical axis (the pipeline's grid)."""
+    if desc.get("origin_um") is not None:
+        return tuple(float(v) for v in desc["origin_um"])
+    z0 = desc.get("z_um", [None])[0]
+    if z0 is None:
+        z0 = (desc.get("settings") or {}).get("z_min_um", -(shape_zyx[0] - 1) / 2 * voxel[0])
+    return (float(z0),) + tuple(-(n - 1) / 2 * d for n, d in zip(shape_zyx[1:], voxel[1:]))
+
+
+def _result_layers(data, axes: str, desc: dict, voxel):
+    """Split channels if any, keep (T)ZYX, and style each quantity."""
+    axes = axes.upper()
+    if data.ndim != len(axes) or any(a not in "TCZYX" for a in axes):
+        raise SsdpcError(
+            f"unexpected axes {axes!r} for data of shape {data.shape}; "
+            "write results with napari-ssdpc (axes ZYX or TZYX)"
+        )
+    if "C" in axes:
+        i = axes.index("C")
+        q = desc.get("quantity")
+        names = desc.get("channels") or CHANNELS.get(q) or [f"{q} {k}" for k in range(data.shape[i])]
+        rest = axes.replace("C", "")
+        return [
+            _result_layers(data[(slice(None),) * i + (k,)], rest, {**desc, "quantity": name}, voxel)[0]
+            for k, name in enumerate(names)
+        ]
+    origin = _origin(desc, data.shape[-3:], voxel)
+    return [result_layer(data, desc.get("quantity", "ri"), voxel, origin, name=desc.get("name", "volume"), info=desc)]
+
+
+def result_layer(data, quantity: str, voxel_um, origin_um, *, name: str, info: dict | None = None):
+    """Layer data tuple of a (z, y, x) or (t, z, y, x) result: scale in µm, axis labels, units,
+    colormap and contrast limits (centred on the medium index for RI, on 0 for signed maps),
+    3D rendering that shows the dominant sign, and ``metadata['ssdpc']`` with the settings."""
+    info = dict(info or {})
+    suffix, cmap, unit, centred = QUANTITIES.get(quantity, (quantity, "gray", "", False))
+    time = data.ndim == 4
+    first = np.asarray(data[0] if time else data, np.float32)
+    centre = 0.0
+    if quantity == "ri":
+        centre = float(info.get("medium_index") or (info.get("optics") or {}).get("medium_index") or np.median(first))
+    rendering = "mip"
+    if centred:
+        dev = first - centre
+        a = float(np.percentile(np.abs(dev), 99.9)) or float(np.abs(dev).max()) or 1e-6
+        lims = [centre - a, centre + a]
+        if -float(dev.min()) > float(dev.max()):
+            rendering = "minip"
+    else:
+        lo, hi = (float(v) for v in np.percentile(first, [0.1, 99.9]))
+        lims = [lo, hi if hi > lo else lo + 1e-6]
+    voxel = tuple(float(v) for v in voxel_um)
+    origin = tuple(float(v) for v in origin_um)
+    info.update(kind="result", quantity=quantity, unit=unit, voxel_um=list(voxel), origin_um=list(origin))
+    kwargs = {
+        "name": name if name.endswith(suffix) else f"{name} {suffix}",
+        "scale": ((1.0,) if time else ()) + voxel,
+        "translate": ((0.0,) if time else ()) + origin,
+        "axis_labels": (("t",) if time else ()) + ("z", "y", "x"),
+        "units": (("pixel",) if time else ()) + ("µm", "µm", "µm"),
+        "colormap": cmap,
+        "contrast_limits": lims,
+        "rendering": rendering,
+        "metadata": {"ssdpc": info},
+    }
+    return (data, kwargs, "image")

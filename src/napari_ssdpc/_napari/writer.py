@@ -1,0 +1,125 @@
+"""napari writer: result layers (RI, phase, absorption, ...) to OME-TIFF or OME-Zarr.
+
+A (z, y, x) layer goes to OME-TIFF (``.ome.tif``) or OME-Zarr (``.zarr``); a (t, z, y, x) time
+series goes to OME-Zarr (one chunk per time point) or, if asked, to a TZYX OME-TIFF. An OME-Zarr
+store holds one image group per quantity ('ri', 'phase', ...), as ``ssdpc reconstruct`` writes it,
+so saving the RI and the phase layer to the same ``NAME.zarr`` puts both in one store.
+Voxel sizes in µm are written in the standard metadata (OME PhysicalSize*, NGFF
+coordinateTransformations), and our own description (quantity, origin, settings) as JSON, which
+``_reader.get_result_reader`` recognises. Both writers are atomic: the output appears complete or
+not at all.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from napari_ssdpc import __version__
+from napari_ssdpc._napari.reader import RESULT_FORMAT, RESULT_VERSION
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.io.frames import write_ome_tiff
+
+
+def write_volume(path: str, data, meta: dict) -> list[str]:
+    """npe2 single-layer writer for image layers of 3 or 4 dimensions."""
+    data = data[0] if isinstance(data, list) else data  # multiscale: the full resolution
+    if data.ndim not in (3, 4):
+        raise SsdpcError(
+            f"layer '{meta.get('name')}' has {data.ndim} dimensions; the ssDPC writer saves "
+            "(z, y, x) volumes or (t, z, y, x) series: pick a reconstruction layer"
+        )
+    info = dict((meta.get("metadata") or {}).get("ssdpc") or {})
+    scale = list(meta.get("scale") or [1.0] * data.ndim)[-3:]
+    translate = list(meta.get("translate") or [0.0] * data.ndim)[-3:]
+    info.setdefault("quantity", "ri")
+    info["name"] = meta.get("name", info.get("name", "volume"))
+    return [str(write_result(path, data, voxel_um=scale, origin_um=translate, info=info))]
+
+
+def write_result(path, data, *, voxel_um, origin_um=(0.0, 0.0, 0.0), info: dict | None = None) -> Path:
+    """Write a (z, y, x) or (t, z, y, x) result; ``.zarr`` -> OME-Zarr, else OME-TIFF."""
+    path = Path(path)
+    desc = _description(info, voxel_um, origin_um)
+    if path.suffix.lower() == ".zarr":
+        return write_ome_zarr(path, data, name=desc["quantity"], voxel_um=voxel_um, origin_um=origin_um, attrs=desc)
+    if not path.name.lower().endswith((".ome.tif", ".ome.tiff")):
+        raise SsdpcError(f"{path.name}: save results as NAME.ome.tif (a volume) or NAME.zarr (a time series)")
+    axes = "TZYX" if np.ndim(data) == 4 else "ZYX"
+    return write_ome_tiff(path, np.asarray(data, np.float32), axes=axes, voxel_um=voxel_um, description=desc)
+
+
+def _description(info, voxel_um, origin_um) -> dict:
+    d = {k: v for k, v in dict(info or {}).items() if k != "kind"}
+    d.update(
+        format=RESULT_FORMAT,
+        version=RESULT_VERSION,
+        voxel_um=[float(v) for v in voxel_um],
+        origin_um=[float(v) for v in origin_um],
+        software=f"napari-ssdpc {__version__}",
+    )
+    return _jsonable(d)
+
+
+def _jsonable(obj):
+    """Plain JSON types (numpy scalars and arrays become numbers and lists)."""
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
+
+
+def write_ome_zarr(path, data, *, name: str, voxel_um, origin_um=(0.0, 0.0, 0.0), attrs: dict | None = None) -> Path:
+    """Image group ``name`` (e.g. 'ri') of the OME-Zarr store ``path``, in the layout of
+    ``core.io.create_ome_zarr`` that ``ssdpc reconstruct`` writes: OME-NGFF 0.4, zarr format 2,
+    one chunk per time point, scale and translation in µm. Other image groups in the store are
+    kept. The group is written into a temporary store next to ``path`` and moved into place."""
+    import zarr
+
+    from napari_ssdpc.io.frames import create_ome_zarr
+
+    path = Path(path)
+    if not path.parent.exists():
+        raise SsdpcError(f"output folder does not exist: {path.parent} (create it first)")
+    if path.exists() and not path.is_dir():
+        raise SsdpcError(f"{path} exists and is not a folder; choose another name for the OME-Zarr output")
+    nd = np.ndim(data)
+    if nd not in (3, 4):
+        raise SsdpcError(f"OME-Zarr output needs (z, y, x) or (t, z, y, x) data, got shape {np.shape(data)}")
+    shape = tuple(int(n) for n in np.shape(data))
+    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent))
+    try:
+        arr = create_ome_zarr(tmp, name, shape, "TZYX"[-nd:], voxel_um, attrs=attrs, overwrite=True)
+        for idx in np.ndindex(*shape[:-3]):  # one time point at a time (dask-friendly)
+            arr[idx] = np.asarray(data[idx], np.float32)
+        group = zarr.open_group(str(tmp), mode="a", zarr_format=2)[name]
+        ms = group.attrs["multiscales"]
+        translation = [0.0] * (nd - 3) + [float(v) for v in origin_um]
+        ms[0]["datasets"][0]["coordinateTransformations"].append({"type": "translation", "translation": translation})
+        group.attrs["multiscales"] = ms
+        zarr.open_group(str(path), mode="a", zarr_format=2)  # the store (created if new)
+        _replace_dir(tmp / name, path / name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return path
+
+
+def _replace_dir(src: Path, dst: Path):
+    """Move folder ``src`` to ``dst``, replacing an existing ``dst`` only after ``src`` is complete."""
+    if dst.exists():
+        old = Path(tempfile.mkdtemp(prefix=f".{dst.name}.", suffix=".old", dir=dst.parent))
+        os.rmdir(old)
+        os.replace(dst, old)
+        os.replace(src, dst)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.replace(src, dst)

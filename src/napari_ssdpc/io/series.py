@@ -1,0 +1,424 @@
+"""Time series at scale: stream raw frames through a Reconstructor into a (t, z, y, x) OME-Zarr.
+
+- Streaming: frames are read one at a time (a memory map of an uncompressed TIFF, else one
+  page at a time), so memory is bounded by a few frames whatever the series length.
+- Output: one OME-Zarr image group per quantity (``ri`` and the requested extras), chunked
+  one frame per chunk (``io.create_ome_zarr``).
+- Resumable and crash-safe: zarr writes every chunk to a temporary file and renames it, and a
+  frame is marked done (one byte in the ``ssdpc_done`` array) only after all its chunks are
+  written. A rerun with the same input and settings skips the frames marked done; frames left
+  unmarked by an interrupted run read as NaN, never as garbage, until they are redone.
+- Scale-out: ``workers=N`` runs the same per-frame function on a local Dask cluster,
+  ``scheduler=ADDRESS`` on an existing one. Workers build their own Reconstructor from a small
+  :class:`Recipe` (once per worker process) and read and write the files themselves, so the
+  input and output paths must be visible to them (a shared file system).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from napari_ssdpc.errors import SsdpcError
+
+SAVE_CHOICES = ("phase", "dpc", "stacks", "absorption", "delta_n")
+DONE = "ssdpc_done"  # root array: 1 where a frame is completely written
+_STAMP = "ssdpc_series"  # root attribute: what the store holds (input, settings, outputs)
+
+
+# ------------------------------------------------------------------- input
+class FrameSource:
+    """Raw frames (t, y, x) of a TIFF series, read one at a time; or an in-memory array.
+
+    Pickles as its path (Dask workers reopen the file themselves)."""
+
+    def __init__(self, source):
+        self.path = None if isinstance(source, np.ndarray) else Path(source)
+        self._array = source if isinstance(source, np.ndarray) else None
+        self._data = None
+        a = self._open()
+        if a.ndim not in (2, 3):
+            raise SsdpcError(f"{self.name}: expected a 2D frame or a (t, y, x) series, got shape {a.shape}")
+        self.shape = tuple(int(v) for v in a.shape)
+        if a.ndim == 2:
+            self.shape = (1,) + self.shape
+        self.dtype = a.dtype
+
+    @property
+    def name(self) -> str:
+        return "array" if self.path is None else str(self.path.resolve())
+
+    @property
+    def fingerprint(self) -> str:
+        """The path, or for an array a hash of its first frame."""
+        if self.path is not None:
+            return self.name
+        return "array:" + hashlib.sha256(np.ascontiguousarray(self[0]).tobytes()).hexdigest()[:16]
+
+    def _open(self):
+        if self._array is not None:
+            return self._array
+        if self._data is None:
+            self._data = _open_tiff(self.path)
+        return self._data
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __getitem__(self, t) -> np.ndarray:
+        if not 0 <= int(t) < self.shape[0]:
+            raise IndexError(f"frame {t} of {self.shape[0]}")
+        a = self._open()
+        frame = a[int(t)] if a.ndim == 3 else (a[0] if isinstance(a, _PagedSeries) else a)
+        return np.array(frame, copy=True)  # detach from the memory map
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_data"] = None
+        return state
+
+
+def _open_tiff(path: Path):
+    """A memory map of an uncompressed TIFF series, else a lazy page-by-page reader."""
+    import tifffile
+
+    if not path.is_file():
+        raise SsdpcError(f"file not found: {path} (check the path)")
+    try:
+        return np.squeeze(tifffile.memmap(path, mode="r"))
+    except Exception:  # compressed, tiled or not contiguous: read page by page
+        pass
+    try:
+        tif = tifffile.TiffFile(path)
+        series = tif.series[0]
+    except Exception as e:  # tifffile raises many types for foreign files
+        raise SsdpcError(f"{path}: not a readable TIFF ({type(e).__name__}); give a TIFF or OME-TIFF series") from None
+    return _PagedSeries(tif, series)
+
+
+class _PagedSeries:
+    """(t, y, x) view of a TIFF series that decodes one page per frame."""
+
+    def __init__(self, tif, series):
+        shape = tuple(s for s in series.shape if s != 1)
+        if len(shape) not in (2, 3):
+            raise SsdpcError(f"{tif.filename}: expected a 2D frame or a (t, y, x) series, got shape {series.shape}")
+        self._tif, self.shape, self.dtype = tif, shape, series.dtype
+        self.ndim = len(shape)
+
+    def __getitem__(self, t):
+        return self._tif.asarray(key=int(t) if self.ndim == 3 else 0, series=0).reshape(self.shape[-2:])
+
+
+# ----------------------------------------------------------------- recipe
+@dataclass
+class Recipe:
+    """Everything that builds a Reconstructor; small enough to send to Dask workers."""
+
+    optics: object
+    calibration: object
+    settings: dict = field(default_factory=dict)  # Reconstructor keywords (z, dz, iterations, ...)
+    flat: np.ndarray | None = None
+
+    def build(self, progress=None):
+        from napari_ssdpc.reconstruction.pipeline import Reconstructor
+
+        return Reconstructor(self.optics, self.calibration, flat=self.flat, progress=progress, **self.settings)
+
+    @functools.cached_property
+    def key(self) -> str:
+        """Identifies the operators (a Dask worker's cache)."""
+        return self._hash(self.settings)
+
+    @functools.cached_property
+    def result_key(self) -> str:
+        """Identifies the results: the key without the device (CPU and GPU agree to float
+        rounding), so that a run may be resumed on the other device."""
+        return self._hash({k: v for k, v in self.settings.items() if k != "device"})
+
+    def _hash(self, settings) -> str:
+        h = hashlib.sha256()
+        h.update(json.dumps(self.optics.to_dict(), sort_keys=True, default=str).encode())
+        h.update(json.dumps(self.calibration.to_dict(), sort_keys=True, default=str).encode())
+        h.update(json.dumps(settings, sort_keys=True, default=str).encode())
+        if self.flat is not None:
+            h.update(np.ascontiguousarray(self.flat).tobytes())
+        return h.hexdigest()[:16]
+
+
+_WORKER_CACHE: dict = {}
+
+
+def _reconstructor(recipe: Recipe):
+    """The Reconstructor of this recipe, built once per process (a Dask worker keeps it)."""
+    key = recipe.key
+    if key not in _WORKER_CACHE:
+        _WORKER_CACHE.clear()  # one set of operators per worker
+        _WORKER_CACHE[key] = recipe.build()
+    return _WORKER_CACHE[key]
+
+
+# ---------------------------------------------------------------- outputs
+def result_images(result, save) -> dict:
+    """{name: (array, axes, description)} of the requested outputs of one frame."""
+    out = {"ri": (result.ri, "ZYX", "refractive index")}
+    if "delta_n" in save:
+        out["delta_n"] = (result.delta_n, "ZYX", "refractive-index difference to the medium")
+    if "phase" in save:
+        out["phase"] = (result.phase, "ZYX", "phase per slab, rad")
+    if "absorption" in save:
+        out["absorption"] = (result.absorption, "ZYX", "absorption mu per slab")
+    if "dpc" in save:
+        out["dpc"] = (np.stack([result.dpc["ud"], result.dpc["lr"]]), "CZYX", "DPC up-down, left-right")
+    if "stacks" in save:
+        out["stacks"] = (
+            np.stack([result.stacks[h] for h in ("up", "down", "left", "right")]),
+            "CZYX",
+            "RL intensity stacks up, down, left, right",
+        )
+    return out
+
+
+def output_layout(rec, save) -> dict:
+    """{name: (shape per frame, axes, description)} without reconstructing anything."""
+    z, (ny, nx) = len(rec.z_um), rec.mask.shape
+    vol = (z, ny, nx)
+    table = {
+        "ri": (vol, "ZYX", "refractive index"),
+        "delta_n": (vol, "ZYX", "refractive-index difference to the medium"),
+        "phase": (vol, "ZYX", "phase per slab, rad"),
+        "absorption": (vol, "ZYX", "absorption mu per slab"),
+        "dpc": ((2,) + vol, "CZYX", "DPC up-down, left-right"),
+        "stacks": ((4,) + vol, "CZYX", "RL intensity stacks up, down, left, right"),
+    }
+    return {n: table[n] for n in ["ri"] + [s for s in SAVE_CHOICES if s in save]}
+
+
+def _describe(recipe: Recipe, save):
+    rec = _reconstructor(recipe)
+    dz, dy = rec.dz, rec.pixel_um
+    return output_layout(rec, save), (dz, dy, dy), rec.settings(), rec.build_seconds
+
+
+# ------------------------------------------------------------------ store
+def _open_store(out: Path, n_frames, layout, voxel, stamp: dict, attrs: dict):
+    """Create the store, or reopen it to resume the same job. Returns the done-flags array."""
+    import zarr
+
+    from napari_ssdpc.io.frames import create_ome_zarr
+
+    fresh = not out.exists() or not any(p.name not in (".zgroup", ".zattrs") for p in out.iterdir())
+    root = zarr.open_group(str(out), mode="a", zarr_format=2)
+    old = root.attrs.get(_STAMP)
+    if old is None and not fresh:
+        raise SsdpcError(f"{out} exists and was not written by `ssdpc reconstruct`; choose a new output path")
+    if old is not None and old != stamp:
+        raise SsdpcError(
+            f"{out} holds a reconstruction of another input or with other settings; "
+            "choose a new output path or delete the old one to start over"
+        )
+    if old is None:
+        root.attrs[_STAMP] = stamp  # first: a rerun recognises its own store
+    for name, (shape, axes, what) in layout.items():
+        complete = name in root and "0" in root[name]  # else a killed run left it half made
+        create_ome_zarr(
+            out,
+            name,
+            (n_frames,) + tuple(shape),
+            "T" + axes,
+            voxel,
+            attrs={**attrs, "quantity": what},
+            overwrite=not complete,
+        )
+    if DONE not in root:
+        root.create_array(DONE, shape=(n_frames,), chunks=(1,), dtype="uint8", fill_value=0)
+    for p in out.rglob("*.partial"):  # a temporary chunk file of a killed run
+        p.unlink(missing_ok=True)
+    return root[DONE]
+
+
+def done_frames(out) -> np.ndarray:
+    """Indices of the frames completely written to a series store."""
+    import zarr
+
+    root = zarr.open_group(str(out), mode="r")
+    if DONE not in root:
+        return np.zeros(0, int)
+    return np.flatnonzero(root[DONE][:] == 1)
+
+
+def _write_frame(out: Path, t: int, images: dict) -> float:
+    import zarr
+
+    t0 = time.perf_counter()
+    root = zarr.open_group(str(out), mode="r+")
+    for name, (data, _, _) in images.items():
+        root[name]["0"][t] = data
+    root[DONE][t] = 1  # only after every chunk of the frame is on disk
+    return time.perf_counter() - t0
+
+
+def process_frame(rec_or_recipe, source: FrameSource, t: int, out, save) -> dict:
+    """Read frame t, reconstruct it, write its chunks and mark it done. Returns its timings.
+    The same function runs serially and on Dask workers."""
+    rec = _reconstructor(rec_or_recipe) if isinstance(rec_or_recipe, Recipe) else rec_or_recipe
+    t0 = time.perf_counter()
+    frame = source[t]
+    t1 = time.perf_counter()
+    result = rec.reconstruct(frame)
+    t2 = time.perf_counter()
+    write = _write_frame(Path(out), t, result_images(result, save))
+    return {"t": int(t), "read_s": t1 - t0, "reconstruct_s": t2 - t1, "write_s": write, **result.timings}
+
+
+# ------------------------------------------------------------------- driver
+@dataclass
+class SeriesReport:
+    frames: int
+    written: int
+    skipped: int
+    seconds: float
+    build_seconds: float
+    timings: list
+
+    @property
+    def frames_per_second(self) -> float:
+        return self.written / self.seconds if self.seconds > 0 else float("nan")
+
+
+def reconstruct_series(
+    source,
+    out,
+    recipe: Recipe,
+    *,
+    save=(),
+    meta=None,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    progress: bool = True,
+    rec=None,
+    stop_after: int | None = None,
+) -> SeriesReport:
+    """Stream ``source`` (a FrameSource, TIFF path or (t, y, x) array) through the recipe's
+    Reconstructor into the OME-Zarr ``out``; see the module docstring.
+
+    ``rec``: an already built Reconstructor of this recipe (serial runs only). ``stop_after``:
+    process at most this many pending frames (a partial run, for tests and previews)."""
+    source = source if isinstance(source, FrameSource) else FrameSource(source)
+    out = Path(out)
+    if not out.parent.exists():
+        raise SsdpcError(f"output folder does not exist: {out.parent} (create it first)")
+    save = [s for s in save]
+    bad = [s for s in save if s not in SAVE_CHOICES]
+    if bad:
+        raise SsdpcError(f"unknown output {','.join(bad)}; choose from {','.join(SAVE_CHOICES)}")
+    if workers is not None and workers < 1:
+        raise SsdpcError(f"--workers must be >= 1, got {workers}")
+    distributed = workers is not None or scheduler is not None
+    if distributed and source.path is None:
+        raise SsdpcError("Dask workers read the frames from a file; give the series as a TIFF path")
+    if tuple(source.shape[1:]) != tuple(recipe.calibration.frame_shape):
+        raise SsdpcError(
+            f"{source.name}: frames of shape {source.shape[1:]} differ from the calibration's "
+            f"{tuple(recipe.calibration.frame_shape)}; use the calibration of this camera ROI"
+        )
+    cluster = client = None
+    try:
+        if distributed:
+            client, cluster = _client(workers, scheduler)
+            layout, voxel, settings, build = client.submit(_describe, recipe, save, pure=False).result()
+        else:
+            rec = recipe.build() if rec is None else rec
+            layout, voxel, settings, build = (
+                output_layout(rec, save),
+                (rec.dz, rec.pixel_um, rec.pixel_um),
+                rec.settings(),
+                rec.build_seconds,
+            )
+        stamp = {
+            "input": source.fingerprint,
+            "frames": len(source),
+            "frame_shape": list(source.shape[1:]),
+            "recipe": recipe.result_key,
+            "outputs": sorted(layout),
+        }
+        attrs = {**(meta or {}), "settings": settings}
+        done = _open_store(out, len(source), layout, voxel, stamp, attrs)
+        finished = set(np.flatnonzero(done[:] == 1).tolist())
+        pending = [t for t in range(len(source)) if t not in finished]
+        if stop_after is not None:
+            pending = pending[: int(stop_after)]
+        t0 = time.perf_counter()
+        bar = _bar(len(source), len(finished), progress)
+        timings = []
+        if distributed:
+            timings = _run_distributed(client, recipe, source, pending, out, save, bar)
+        else:
+            for t in pending:
+                timings.append(process_frame(rec, source, t, out, save))
+                bar.update(1)
+        bar.close()
+        return SeriesReport(
+            len(source),
+            len(pending),
+            len(finished),
+            time.perf_counter() - t0,
+            build,
+            sorted(timings, key=lambda d: d["t"]),
+        )
+    finally:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _bar(total, initial, show):
+    from tqdm.auto import tqdm
+
+    return tqdm(
+        total=total,
+        initial=initial,
+        desc="frames",
+        unit="frame",
+        file=sys.stderr,
+        dynamic_ncols=True,
+        disable=not show,
+        smoothing=0.1,
+    )
+
+
+def _client(workers, scheduler):
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise SsdpcError("--workers/--scheduler need Dask distributed; pip install distributed") from None
+    if scheduler is not None:
+        try:
+            return Client(scheduler, timeout="20s"), None
+        except (OSError, TimeoutError) as e:
+            raise SsdpcError(
+                f"cannot reach the Dask scheduler at {scheduler} ({type(e).__name__}); "
+                "check the address, e.g. tcp://host:8786"
+            ) from None
+    cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=None)
+    return Client(cluster), cluster
+
+
+def _run_distributed(client, recipe, source, pending, out, save, bar):
+    from distributed import as_completed
+
+    recipe_f = client.scatter(recipe, broadcast=True)
+    futures = [client.submit(process_frame, recipe_f, source, t, str(out), save, pure=False) for t in pending]
+    timings = []
+    for fut in as_completed(futures):
+        timings.append(fut.result())  # re-raises a worker's error here
+        bar.update(1)
+    return timings

@@ -1,0 +1,105 @@
+"""Geometry of the lenslet lattice on the sensor, shared by the simulator and calibration.
+
+Frames of reference
+- MLA frame: x right, y down (the object axes of DESIGN.md §3), in µm on the MLA.
+- Sensor frame: x = column, y = row, in pixels, origin at the centre of pixel (0, 0).
+
+A displacement ``d`` in the MLA frame (expressed in sensor pixels) lands on the sensor
+as ``R(rotation) @ F @ d`` with ``F = diag(±1, ±1)`` from ``flip_x``/``flip_y``.
+``rotation_deg`` is measured from the sensor +x axis toward +y (clockwise as displayed,
+since rows run downwards). The same matrix maps the content of every elemental image:
+an in-focus object point at (x, y) µm appears at ``centre + A @ (x, y) * M_EI / pixel``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from napari_ssdpc.settings.optics import Lenslet, Optics
+
+
+@dataclass(frozen=True)
+class Grid:
+    """Lenslet lattice on the sensor: optical axis, reference vertex, pitch, rotation."""
+
+    axis_px: tuple[float, float]  # optical axis on the sensor (x, y), sub-pixel
+    vertex_px: tuple[float, float]  # reference lattice vertex nearest the axis (x, y)
+    pitch_px: float
+    rotation_deg: float = 0.0
+    flip_x: bool = False
+    flip_y: bool = False
+
+    @classmethod
+    def nominal(cls, optics: Optics, axis_px=None, axis_offset_px=(0.0, 0.0), rotation_deg=0.0, pitch_px=None) -> Grid:
+        """Grid of an ideal instrument. ``axis_offset_px`` is the optical axis position
+        relative to the lattice vertex, in pixels along the lattice axes."""
+        if axis_px is None:
+            axis_px = ((optics.width_px - 1) / 2.0, (optics.height_px - 1) / 2.0)
+        g = cls(
+            tuple(float(v) for v in axis_px),
+            (0.0, 0.0),
+            float(pitch_px or optics.pitch_px),
+            float(rotation_deg),
+            optics.flip_x,
+            optics.flip_y,
+        )
+        off = g.matrix @ np.asarray(axis_offset_px, dtype=float)
+        vertex = np.asarray(g.axis_px) - off
+        return cls(g.axis_px, (float(vertex[0]), float(vertex[1])), g.pitch_px, g.rotation_deg, g.flip_x, g.flip_y)
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """2x2 map from the MLA/object frame to the sensor frame (rotation @ flip)."""
+        t = math.radians(self.rotation_deg)
+        rot = np.array([[math.cos(t), -math.sin(t)], [math.sin(t), math.cos(t)]])
+        flip = np.diag([-1.0 if self.flip_x else 1.0, -1.0 if self.flip_y else 1.0])
+        return rot @ flip
+
+    def lattice_px(self, row, col) -> np.ndarray:
+        """Sensor position (x, y) of the lenslet centre(s) with lattice index (row, col)."""
+        row, col = np.broadcast_arrays(np.asarray(row, float), np.asarray(col, float))
+        d = np.stack([(col + 0.5) * self.pitch_px, (row + 0.5) * self.pitch_px], axis=-1)
+        return np.asarray(self.vertex_px) + d @ self.matrix.T
+
+    def axis_offset_px(self) -> np.ndarray:
+        """Optical axis relative to the reference vertex, along the lattice axes (px)."""
+        d = np.asarray(self.axis_px) - np.asarray(self.vertex_px)
+        return np.linalg.solve(self.matrix, d)
+
+    def axis_offset_um(self, optics: Optics) -> np.ndarray:
+        """Same offset in µm on the MLA (uses the measured pitch as the length scale)."""
+        return self.axis_offset_px() * optics.pitch_um / self.pitch_px
+
+    def lenslets(self, optics: Optics, min_fraction: float = 1e-3) -> list[Lenslet]:
+        """Lenslets overlapping the pupil for this axis position."""
+        return optics.lenslets(self.axis_offset_um(optics), min_fraction=min_fraction)
+
+    def object_to_sensor(self, lenslet: Lenslet, xy_um, optics: Optics) -> np.ndarray:
+        """Sensor position of an in-focus object point (x, y) µm in the EI of ``lenslet``."""
+        scale = optics.m_ei / optics.pixel_um * self.pitch_px / optics.pitch_px
+        centre = self.lattice_px(lenslet.row, lenslet.col)
+        return centre + (np.asarray(xy_um, dtype=float) * scale) @ self.matrix.T
+
+    def to_dict(self) -> dict:
+        return {
+            "axis_px": list(self.axis_px),
+            "vertex_px": list(self.vertex_px),
+            "pitch_px": self.pitch_px,
+            "rotation_deg": self.rotation_deg,
+            "flip_x": self.flip_x,
+            "flip_y": self.flip_y,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Grid:
+        return cls(
+            tuple(map(float, d["axis_px"])),
+            tuple(map(float, d["vertex_px"])),
+            float(d["pitch_px"]),
+            float(d.get("rotation_deg", 0.0)),
+            bool(d.get("flip_x", False)),
+            bool(d.get("flip_y", False)),
+        )

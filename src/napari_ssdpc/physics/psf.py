@@ -1,0 +1,392 @@
+"""Wave-optics PSF of the Fourier light-field microscope (paper Eq. 6) and its fast per-lenslet form.
+
+Physics (DESIGN.md §3, paper Eq. 6). A point at (0, 0, z) has, in the focal plane, the angular
+spectrum exp(i2π z η(u)) with η(u) = sqrt((n/λ)² − |u|²) (forward propagation by +z). The
+objective passes |u| ≤ NA/λ, and the relay puts frequency u at x_mla = −λ f_obj m_r u on the MLA
+(the M_relay scaling of Eq. 6, inverted). Lenslet k multiplies by the transmittance
+T = circ(|x − c_k| ≤ r_ml) exp(−iπ|x − c_k|²/(λ f_ml)); the field then propagates over f_ml to the
+sensor (angular spectrum), and the camera integrates |U|² over each pixel.
+
+Fast form. Lens phase + propagation over f_ml is a Fourier transform, so behind lenslet k, at
+sensor offset s = M_EI·r from the lenslet centre, the EI is the coherent image of the point through
+the sub-aperture P_k(u) = P_obj(u)·circ(|u − u_k| ≤ ρ):
+
+    PSF_k(r; z) = |∫ P_k(u) exp(i2π z η(u)) exp(i2π u·r) d²u|²            (object µm, upright)
+
+It differs from Eq. 6 only by the light a neighbouring lenslet spills into the EI (its diffraction
+tail) and by the Fresnel approximation of the propagation over f_ml. We keep it factorised:
+
+    PSF_k(r; z) = B_k(r − z·t_k; z),   t_k = <u/η(u)>_{|P_k|²}   (the mean tanθ·û vector)
+
+- z·t_k is the parallax: the centroid of PSF_k is exactly the |P_k|²-weighted mean phase
+  gradient of the pupil. It is applied as a Fourier phase ramp, so it is exact to sub-pixel.
+- B_k (the defocus blur with the parallax removed) is small and stored per lenslet and depth on a
+  ``support_px`` square, float32 (210 MB for 32 lenslets x 161 depths). A blur shared by all
+  lenslets would not reach 1%: the curvature of η(u) varies across the pupil (an astigmatic
+  blur), 1.3% relative L2 at |z| = 80 µm for the unclipped diagonal lenslets of the paper's
+  optics, and the 16 edge lenslets clipped by the pupil differ by 3-50% (their own shapes).
+- The pixel integration is the separable factor sinc(f_x) sinc(f_y) of the OTF (f in cycles/px).
+
+Normalisation: a kernel holds the energy per pixel, as a fraction of the light through one
+unclipped lenslet. Over the whole plane it sums to the lenslet's pupil fraction (1 inside the
+pupil, less for the clipped edge lenslets); a finite window loses the diffraction tail (about 1.3%
+outside the EI of the paper's optics, 2/(π v) of an Airy pattern at v = 2π NA_sub R/λ).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.fft as sfft
+
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.physics.lattice import Grid
+from napari_ssdpc.settings.optics import Lenslet, Optics
+
+
+# ------------------------------------------------------------------ pupil helpers
+def soft_disk(dist, radius, step):
+    """Disk sampled with an antialiased edge: a linear ramp one sample wide, so that the sampled
+    amplitude integrates to the disk area to second order in the step."""
+    return np.clip(0.5 + (radius - np.asarray(dist)) / step, 0.0, 1.0)
+
+
+def axial_frequency(ux, uy, optics: Optics):
+    """η(u) = sqrt((n/λ)² − |u|²) in cycles/µm (0 for evanescent waves)."""
+    k2 = (optics.medium_index / optics.wavelength_um) ** 2
+    return np.sqrt(np.maximum(k2 - ux * ux - uy * uy, 0.0))
+
+
+def subaperture_pupil(optics: Optics, u_k, shape, du):
+    """P_k = P_obj·circ(|u − u_k| ≤ ρ) on the grid u = u_k + fftfreq (unshifted FFT order).
+
+    Returns (P, ux, uy) with ux, uy the absolute frequencies (broadcastable to ``shape``).
+    """
+    ny, nx = shape
+    duy, dux = (du, du) if np.isscalar(du) else du
+    fy = sfft.fftfreq(ny, 1.0 / (ny * duy))[:, None]
+    fx = sfft.fftfreq(nx, 1.0 / (nx * dux))[None, :]
+    ux, uy = u_k[0] + fx, u_k[1] + fy
+    step = math.sqrt(dux * duy)
+    p = soft_disk(np.hypot(fx, fy), optics.subaperture_radius, step)
+    p = p * soft_disk(np.hypot(ux, uy), optics.cutoff, step)
+    return p, ux, uy
+
+
+def mean_tilt(optics: Optics, pupil, ux, uy) -> np.ndarray:
+    """<u/η(u)> weighted by |P|² (x, y): a point at depth z is displaced by z times this."""
+    w = np.abs(pupil) ** 2
+    eta = axial_frequency(ux, uy, optics)
+    total = w.sum()
+    if total <= 0:
+        raise SsdpcError("a lenslet sub-aperture lies outside the objective pupil; drop it from the lenslet list")
+    return np.array([np.sum(w * ux / eta), np.sum(w * uy / eta)]) / total
+
+
+def _boxed_pupil(optics: Optics, u_k, shape, du):
+    """``subaperture_pupil`` on a small odd box, in natural order (offsets −m..m from u_k)."""
+    return tuple(np.fft.fftshift(a) for a in subaperture_pupil(optics, u_k, shape, du))
+
+
+# ------------------------------------------------------------ reference (Eq. 6)
+@dataclass
+class ReferencePSF:
+    """Sensor images of a point at each depth (Eq. 6), on a region of the sensor.
+
+    ``images[i, r, c]`` is the energy in sensor pixel (x, y) = origin_px + (c, r) for depth
+    ``z_um[i]``, as a fraction of the light through one unclipped lenslet.
+    """
+
+    images: np.ndarray
+    z_um: np.ndarray
+    origin_px: tuple[float, float]
+    axis_px: tuple[float, float]
+    lenslets: list[Lenslet]
+    pixel_um: float
+
+    @property
+    def centres_px(self) -> np.ndarray:
+        """EI centres (x, y) in sensor px: directly behind each lenslet centre."""
+        a = np.array([ln.a_um for ln in self.lenslets], dtype=float)
+        return np.asarray(self.axis_px) + a / self.pixel_um
+
+    def windows(self, shape):
+        """EI windows (Z, K, h, w) around the pixel nearest each EI centre, and the sub-pixel
+        offsets (K, 2) (x, y) of the window centre from the EI centre, in px (for LensletPSF)."""
+        h, w = shape
+        c = self.centres_px - np.asarray(self.origin_px)
+        ic = np.rint(c).astype(int)
+        out = np.empty((len(self.z_um), len(self.lenslets), h, w), self.images.dtype)
+        for k, (cx, cy) in enumerate(ic):
+            y0, x0 = cy - h // 2, cx - w // 2
+            if y0 < 0 or x0 < 0 or y0 + h > self.images.shape[1] or x0 + w > self.images.shape[2]:
+                raise SsdpcError("EI window leaves the reference region; compute it with a larger margin_um")
+            out[:, k] = self.images[:, y0 : y0 + h, x0 : x0 + w]
+        return out, ic - c
+
+
+def reference_psf(
+    optics: Optics,
+    grid_or_lenslets=None,
+    z_um=0.0,
+    *,
+    oversample: int = 1,
+    margin_um: float | None = None,
+    pixel_integration: bool = True,
+    progress=None,
+) -> ReferencePSF:
+    """PSF of the whole instrument by paper Eq. 6, for every depth in ``z_um``.
+
+    ``grid_or_lenslets``: a ``Grid`` (axis position on the sensor; unrotated and unmirrored), a
+    list of ``Lenslet`` (axis on a pixel centre of the region), or None (nominal lattice). The
+    region covers the objective pupil on the MLA plus ``margin_um`` (default half a pitch).
+    ``oversample`` (odd) samples each pixel q×q times; the pixel integration is an exact box
+    filter in the Fourier domain (sinc), so q = 1 already converges for the paper's optics.
+    """
+    q = int(oversample)
+    if q < 1 or q % 2 == 0:
+        raise SsdpcError(f"oversample must be an odd integer >= 1, got {oversample}")
+    z = np.atleast_1d(np.asarray(z_um, dtype=float))
+    pix = optics.pixel_um
+    margin = 0.5 * optics.pitch_um if margin_um is None else float(margin_um)
+    half_px = int(math.ceil((optics.pupil_radius_mla_um + margin) / pix))
+    if isinstance(grid_or_lenslets, Grid):
+        grid = grid_or_lenslets
+        if not np.allclose(grid.matrix, np.eye(2)):
+            raise SsdpcError("reference_psf needs an unrotated, unmirrored grid; use Grid.nominal(optics)")
+        axis = np.asarray(grid.axis_px, dtype=float)
+        offset = grid.axis_offset_um(optics)
+        apertures = optics.lenslets(offset, min_fraction=1e-9)
+        lenslets = grid.lenslets(optics)
+        origin = np.rint(axis) - half_px
+    else:
+        lenslets = optics.lenslets() if grid_or_lenslets is None else list(grid_or_lenslets)
+        apertures = lenslets
+        origin = np.array([0.0, 0.0])
+        axis = origin + half_px
+    npx = 2 * half_px + 1
+    n = sfft.next_fast_len(npx * q)
+    dx = pix / q
+    # fine sample j sits at sensor px origin + (j - q//2)/q; pixel m centre at j = m q + q//2
+    xs = ((origin[0] + (np.arange(n) - q // 2) / q) - axis[0]) * pix  # MLA x (µm) from the axis
+    ys = ((origin[1] + (np.arange(n) - q // 2) / q) - axis[1]) * pix
+    field0, eta = _pupil_field_on_mla(optics, xs, ys, dx)
+    field0 = field0 * _mla_transmittance(optics, apertures, xs, ys, dx)
+    prop = _angular_spectrum(optics, n, dx)
+    fx = sfft.fftfreq(n, dx)
+    box = np.sinc(fx * pix)
+    scale = pix * pix / (math.pi * optics.lenslet_radius_um**2)
+    images = np.empty((len(z), npx, npx))
+    for i, zi in enumerate(z):
+        u = field0 * np.exp(2j * np.pi * zi * eta)
+        u = sfft.ifft2(sfft.fft2(u, workers=-1) * prop, workers=-1)
+        inten = np.abs(u) ** 2
+        if pixel_integration:
+            inten = sfft.irfft2(
+                sfft.rfft2(inten, workers=-1) * box[:, None] * box[None, : n // 2 + 1], s=(n, n), workers=-1
+            )
+        images[i] = inten[q // 2 :: q, q // 2 :: q][:npx, :npx] * scale
+        if progress is not None:
+            progress(i + 1, len(z))
+    return ReferencePSF(
+        images, z, (float(origin[0]), float(origin[1])), (float(axis[0]), float(axis[1])), list(lenslets), pix
+    )
+
+
+def _pupil_field_on_mla(optics: Optics, xs, ys, dx):
+    """Objective pupil imaged onto the MLA (x_mla = −λ f_obj m_r u) and η at each sample."""
+    scale = optics.wavelength_um * optics.f_obj_um * optics.m_r
+    ux, uy = -xs[None, :] / scale, -ys[:, None] / scale
+    pupil = soft_disk(np.hypot(xs[None, :], ys[:, None]), optics.pupil_radius_mla_um, dx)
+    return pupil.astype(complex), axial_frequency(ux, uy, optics)
+
+
+def _mla_transmittance(optics: Optics, apertures, xs, ys, dx):
+    """T(x) = Σ_k circ(|x − c_k| ≤ r_ml) exp(−iπ|x − c_k|²/(λ f_ml)) (Eq. 6, ref. 70)."""
+    r = optics.lenslet_radius_um
+    lam_f = optics.wavelength_um * optics.mla_focal_length_mm * 1e3
+    t = np.zeros((len(ys), len(xs)), complex)
+    for ln in apertures:
+        cx, cy = ln.a_um
+        jx = np.nonzero(np.abs(xs - cx) <= r + dx)[0]
+        jy = np.nonzero(np.abs(ys - cy) <= r + dx)[0]
+        if len(jx) == 0 or len(jy) == 0:
+            continue
+        sx, sy = slice(jx[0], jx[-1] + 1), slice(jy[0], jy[-1] + 1)
+        d2 = (xs[sx][None, :] - cx) ** 2 + (ys[sy][:, None] - cy) ** 2
+        t[sy, sx] += soft_disk(np.sqrt(d2), r, dx) * np.exp(-1j * np.pi * d2 / lam_f)
+    return t
+
+
+def _angular_spectrum(optics: Optics, n, dx):
+    """Propagator over f_ml in air, exp(i2π f_ml sqrt(1/λ² − |f|²)) without its constant phase."""
+    lam = optics.wavelength_um
+    f_ml = optics.mla_focal_length_mm * 1e3
+    f = sfft.fftfreq(n, dx)
+    f2 = f[None, :] ** 2 + f[:, None] ** 2
+    kz = np.sqrt(np.maximum(1.0 / lam**2 - f2, 0.0))
+    return np.where(f2 < 1.0 / lam**2, np.exp(2j * np.pi * f_ml * (kz - 1.0 / lam)), 0.0)
+
+
+# ------------------------------------------------------------------ fast form
+class LensletPSF:
+    """Per-lenslet EI kernels on the object-space EI grid, factorised as blur x parallax ramp.
+
+    ``shape``: EI window (h, w), default the EI diameter (145 px for the paper's optics); kernel
+    pixel (i, j) samples the object offset ((j − w//2) + off_x, (i − h//2) + off_y)·pixel_um from
+    the EI centre, with ``offsets_px`` (K, 2) (default 0). Blurs are computed per depth on first
+    use and cached (``precompute`` fills the cache with a progress callback).
+    """
+
+    def __init__(
+        self,
+        optics: Optics,
+        lenslets=None,
+        shape=None,
+        pixel_um=None,
+        *,
+        offsets_px=None,
+        support_px=None,
+        z_max_um=None,
+        pixel_integration=True,
+    ):
+        self.optics = optics
+        self.lenslets = list(optics.lenslets() if lenslets is None else lenslets)
+        if not self.lenslets:
+            raise SsdpcError("no lenslets given; calibrate the lattice or use optics.lenslets()")
+        self.pixel_um = float(pixel_um or optics.object_pixel_um)
+        if not self.pixel_um > 0:
+            raise SsdpcError(f"pixel_um must be > 0, got {pixel_um}")
+        if shape is None:
+            r = int(math.floor(optics.ei_radius_um / optics.m_ei / self.pixel_um))
+            shape = (2 * r + 1, 2 * r + 1)
+        self.shape = tuple(int(s) for s in shape)
+        if len(self.shape) != 2 or min(self.shape) < 3:
+            raise SsdpcError(f"EI window shape must be two sizes >= 3 px, got {shape}")
+        k = len(self.lenslets)
+        self.offsets_px = np.zeros((k, 2)) if offsets_px is None else np.asarray(offsets_px, float)
+        if self.offsets_px.shape != (k, 2):
+            raise SsdpcError(f"offsets_px must have shape ({k}, 2) (x, y per lenslet), got {self.offsets_px.shape}")
+        self.pixel_integration = bool(pixel_integration)
+        self.support_px = int(support_px) if support_px else self._default_support(z_max_um)
+        self.support_px = min(self.support_px, max(self.shape))
+        # pupil grid: fine enough for the sub-aperture edge and wide enough for the blur; only the
+        # box around u_k that holds the sub-aperture is kept (a few % of the grid)
+        self._n = sfft.next_fast_len(max(2 * self.support_px, 256))
+        du = 1.0 / (self._n * self.pixel_um)
+        m = min(int(math.ceil(optics.subaperture_radius / du)) + 2, self._n // 2 - 1)
+        self._box = np.arange(-m, m + 1) % self._n
+        shape_box = (2 * m + 1, 2 * m + 1)
+        pupils, ux, uy = zip(*(_boxed_pupil(optics, ln.u, shape_box, du) for ln in self.lenslets))
+        self.tilt = np.stack([mean_tilt(optics, p, a, b) for p, a, b in zip(pupils, ux, uy)])
+        self._pupil = np.stack(pupils).astype(np.float32)
+        # parallax ramps act on the offsets from u_k; the defocus is exp(i2π z [η − η(u_k)])
+        self._f = (np.arange(-m, m + 1) * du).astype(np.float32)
+        eta_k = np.array([axial_frequency(*ln.u, optics) for ln in self.lenslets])[:, None, None]
+        self._deta = (axial_frequency(np.stack(ux), np.stack(uy), optics) - eta_k).astype(np.float32)
+        # the soft pupil edge is a cell average: it multiplies the amplitude by sinc(x du) sinc(y du)
+        f = sfft.fftfreq(self._n)
+        self._deapodise = (1.0 / (np.sinc(f)[:, None] * np.sinc(f)[None, :])).astype(np.float32)
+        self._cache: dict[float, np.ndarray] = {}
+
+    def _default_support(self, z_max_um):
+        """Odd square holding the geometric defocus blur plus 8 Airy radii of diffraction tail
+        (truncation error below 0.1% relative L2 for the paper's optics)."""
+        o = self.optics
+        if z_max_um is None:
+            rec = o.reconstruction
+            z_max_um = max(abs(float(rec["z_min_um"])), abs(float(rec["z_max_um"])))
+        cos3 = (1.0 - (o.na / o.medium_index) ** 2) ** 1.5
+        blur = abs(z_max_um) * o.subaperture_na / (o.medium_index * cos3)
+        airy = 0.61 * o.wavelength_um / o.subaperture_na
+        return 2 * int(math.ceil((blur + 8 * airy) / self.pixel_um)) + 1
+
+    @property
+    def fractions(self) -> np.ndarray:
+        """Pupil fraction of each lenslet (what its kernel sums to over the whole plane)."""
+        return np.array([ln.fraction for ln in self.lenslets])
+
+    def shift_um(self, z) -> np.ndarray:
+        """Parallax z·<u/η>_k (K, 2) (x, y) in object µm: toward the optical axis for z > 0."""
+        return float(z) * self.tilt
+
+    # ---------------------------------------------------------------- blurs
+    def blur(self, z) -> np.ndarray:
+        """B_k(r; z): the kernels with the parallax removed, (K, S, S) float32, centre at S//2."""
+        key = float(z)
+        if key not in self._cache:
+            self._cache[key] = self._compute_blur(key)
+        return self._cache[key]
+
+    def precompute(self, z_values, progress=None) -> None:
+        """Compute and cache the blurs of these depths; ``progress(done, total)`` after each."""
+        zs = np.atleast_1d(z_values)
+        for i, z in enumerate(zs):
+            self.blur(z)
+            if progress is not None:
+                progress(i + 1, len(zs))
+
+    def clear_cache(self) -> None:
+        self._cache.clear()
+
+    def _compute_blur(self, z: float) -> np.ndarray:
+        s = z * self.tilt  # parallax in µm, removed by the ramps
+        ramp_x = np.exp(2j * np.pi * s[:, 0, None] * self._f[None, :]).astype(np.complex64)
+        ramp_y = np.exp(2j * np.pi * s[:, 1, None] * self._f[None, :]).astype(np.complex64)
+        theta = np.float32(2 * np.pi * z) * self._deta
+        box = self._pupil * (np.cos(theta) + 1j * np.sin(theta)) * ramp_y[:, :, None] * ramp_x[:, None, :]
+        q = np.zeros((len(box), self._n, self._n), np.complex64)
+        q[:, self._box[:, None], self._box[None, :]] = box
+        h = sfft.ifft2(q, workers=-1) * self._deapodise  # amplitude PSF x pixel²
+        inten = (h.real**2 + h.imag**2) / (self.pixel_um**2 * math.pi * self.optics.subaperture_radius**2)
+        sup = self.support_px
+        idx = np.arange(sup) - sup // 2
+        return np.ascontiguousarray(inten[:, idx[:, None], idx[None, :]], dtype=np.float32)
+
+    # ------------------------------------------------------------- operators
+    def otf(self, z, fft_shape) -> np.ndarray:
+        """OTFs for a batched real-FFT convolution: (K, P, Q//2+1) complex64 for a scalar z,
+        (K, Z, P, Q//2+1) for a sequence; kernel centre at index 0 (as deconvolution.kernels_to_otf)."""
+        fft_shape = tuple(int(n) for n in fft_shape)
+        if np.ndim(z) == 0:
+            return self._otf_one(float(z), fft_shape)
+        out = np.empty((len(self.lenslets), len(z), fft_shape[0], fft_shape[1] // 2 + 1), np.complex64)
+        for i, v in enumerate(z):
+            out[:, i] = self._otf_one(float(v), fft_shape)
+        return out
+
+    def _otf_one(self, z, fft_shape):
+        b = self.blur(z)
+        p, qn = fft_shape
+        sup = self.support_px
+        if sup > p or sup > qn:
+            raise SsdpcError(f"FFT shape {fft_shape} is smaller than the kernel support {sup}; use a larger one")
+        pad = np.zeros((len(b), p, qn), np.float32)
+        idx = np.arange(sup) - sup // 2  # blur centre -> index 0
+        pad[:, (idx % p)[:, None], (idx % qn)[None, :]] = b
+        otf = sfft.rfft2(pad, workers=-1)
+        t = self.shift_um(z) / self.pixel_um - self.offsets_px  # shift of the blur, px (x, y)
+        fy, fx = sfft.fftfreq(p), sfft.rfftfreq(qn)
+        ramp_y = np.exp(-2j * np.pi * fy[None, :] * t[:, 1, None])
+        ramp_x = np.exp(-2j * np.pi * fx[None, :] * t[:, 0, None])
+        otf *= (ramp_y[:, :, None] * ramp_x[:, None, :]).astype(np.complex64)
+        if self.pixel_integration:
+            otf *= (np.sinc(fy)[:, None] * np.sinc(fx)[None, :]).astype(np.float32)
+        return otf.astype(np.complex64, copy=False)
+
+    def kernels(self, z) -> np.ndarray:
+        """EI-window kernels (K, h, w) float32 for a scalar z, (K, Z, h, w) for a sequence."""
+        if np.ndim(z) != 0:
+            return np.stack([self.kernels(float(v)) for v in z], axis=1)
+        h, w = self.shape
+        t = np.abs(self.shift_um(z) / self.pixel_um - self.offsets_px).max(axis=0)
+        fft_shape = (
+            sfft.next_fast_len(int(h + self.support_px + 2 * math.ceil(t[1])), real=True),
+            sfft.next_fast_len(int(w + self.support_px + 2 * math.ceil(t[0])), real=True),
+        )
+        full = sfft.irfft2(self._otf_one(float(z), fft_shape), s=fft_shape, workers=-1)
+        iy = (np.arange(h) - h // 2) % fft_shape[0]
+        ix = (np.arange(w) - w // 2) % fft_shape[1]
+        return np.ascontiguousarray(full[:, iy[:, None], ix[None, :]], dtype=np.float32)

@@ -1,0 +1,312 @@
+"""Weak-object transfer functions for a general source S and pupil P (paper Eqs. 2-4, DESIGN.md §4).
+
+Intensity model, first order in μ and φ, with o = exp(−μ + iφ) ≈ 1 − μ + iφ, plane waves
+exp(+i2π w·x) and a source normalised by its power ∫S:
+
+    Ĩ(u) = I0·δ(u) − H_abs(u)·μ̃(u) + H_phase(u)·φ̃(u)
+
+    W(u)       = ∫ S(w) P(w+u) P*(w) exp(i2πz[η(w+u) − η(w)]) d²w / ∫ S     (the WOTF)
+    I0         = W(0) = ∫ S |P|² / ∫ S
+    H_abs(u)   = W(u) + W*(−u)           H_abs(0) = 2 I0 (2 for a full disk inside the pupil)
+    H_phase(u) = i [W(u) − W*(−u)]       imaginary and odd in focus (real S and P)
+
+so absorption lowers the intensity by H_abs·μ and a phase adds H_phase·φ. The factor i is the one
+paper Eq. 4 leaves out when it writes H_phi = WOTF*(u) − WOTF(−u) (DESIGN.md §4.3).
+
+Two models give the transfer functions of each half (up, down, left, right) of paper Eq. 5:
+- 'paper': half of the condenser disk as the source, the full objective pupil (paper Eq. 4).
+- 'lenslet': the full condenser disk and the sub-apertures of the lenslets of that half; the EIs
+  of the lenslets add, so H_half = Σ_k H_k and I0_half = Σ_k I0_k (DESIGN.md §4.1-4.2).
+The lenslet at a_y < 0 ("up") sees frequencies u_y > 0 (u_k = −a/(λ f_obj m_r)), so the
+'paper' half-source of "up" is w_y > 0, and likewise "left" is w_x > 0.
+
+For DPC = (I1 − I2)/(I1 + I2) the first-order transfer function is
+    H_DPC = 2 (I0_2 H_1 − I0_1 H_2) / (I0_1 + I0_2)²,
+which is H_1/I0_1 when the halves mirror each other: the phase TF of one half normalised by that
+half's own background, not by the full aperture and not doubled (DESIGN.md §4.3).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import scipy.fft as sfft
+
+from napari_ssdpc.errors import SsdpcError, SsdpcWarning
+from napari_ssdpc.physics.psf import axial_frequency, soft_disk, subaperture_pupil
+from napari_ssdpc.settings.optics import Lenslet, Optics
+
+HALVES = ("up", "down", "left", "right")
+AXES = {"ud": ("up", "down"), "lr": ("left", "right")}
+#: In-focus peak |H_DPC| below which the phase is too weak to invert (see docs/operators.md).
+WEAK_CONTRAST = 0.1
+
+
+# ------------------------------------------------------------ general (S, P)
+def weak_object_transfer_functions(source, pupil, z_um=0.0, eta=None, out_shape=None, norm=None):
+    """(H_abs, H_phase) of a source S(w) and pupil P(w) by FFT correlation.
+
+    ``source`` (real) and ``pupil`` (complex) share one frequency grid (..., My, Mx) in unshifted
+    FFT order: sample j sits at w = w0 + j·du (j from fftfreq). ``eta`` is η(w) on that grid,
+    needed when ``z_um`` is not 0. The outputs are sampled at the differences u = m·du in the
+    unshifted FFT order of ``out_shape`` (default: the input grid), shape (..., ny, nx), or
+    (Z, ..., ny, nx) for a sequence of z. The correlation is linear (zero padded), not circular.
+    ``norm`` is the source power ∫S (default the sum of ``source``).
+    """
+    s = np.asarray(source, dtype=float)
+    p = np.asarray(pupil, dtype=complex)
+    if s.shape != p.shape or s.ndim < 2:
+        raise SsdpcError(f"source {s.shape} and pupil {p.shape} must share one 2D frequency grid")
+    zs = np.atleast_1d(np.asarray(z_um, dtype=float))
+    if eta is None and np.any(zs != 0):
+        raise SsdpcError("defocus needs eta = η(w) on the pupil grid; pass eta=axial_frequency(...)")
+    norm = float(s.sum()) if norm is None else float(norm)
+    if not norm > 0:
+        raise SsdpcError("the source is empty; give a source with positive power (condenser_na > 0)")
+    out_shape = tuple(s.shape[-2:]) if out_shape is None else tuple(out_shape)
+    pad = tuple(sfft.next_fast_len(m + n) for m, n in zip(s.shape[-2:], out_shape))
+    s_pad = _embed(s, pad)
+    p_pad = _embed(p, pad)
+    eta_pad = None if eta is None else _embed(np.broadcast_to(eta, s.shape), pad)
+    iy, ix = (_fft_indices(n) for n in out_shape)
+    h_abs, h_phase = [], []
+    for z in zs:
+        q = p_pad if z == 0 else p_pad * np.exp(2j * np.pi * z * eta_pad)
+        # W(m) = Σ_j S_j Q_{j+m} Q*_j = IFFT[conj(FFT(S·Q)) · FFT(Q)]
+        w = sfft.ifft2(np.conj(sfft.fft2(s_pad * q, workers=-1)) * sfft.fft2(q, workers=-1), workers=-1) / norm
+        w_pos = w[..., (iy % pad[0])[:, None], (ix % pad[1])[None, :]]
+        w_neg = np.conj(w[..., (-iy % pad[0])[:, None], (-ix % pad[1])[None, :]])
+        h_abs.append((w_pos + w_neg).astype(np.complex64))
+        h_phase.append((1j * (w_pos - w_neg)).astype(np.complex64))
+    if np.ndim(z_um) == 0:
+        return h_abs[0], h_phase[0]
+    return np.stack(h_abs), np.stack(h_phase)
+
+
+def _fft_indices(n):
+    """Integer frequency indices of an unshifted FFT axis of length n."""
+    return np.rint(sfft.fftfreq(n) * n).astype(int)
+
+
+def _embed(a, shape):
+    """Zero-pad an unshifted-order array into a larger unshifted-order grid (last two axes)."""
+    iy = _fft_indices(a.shape[-2]) % shape[0]
+    ix = _fft_indices(a.shape[-1]) % shape[1]
+    out = np.zeros(a.shape[:-2] + tuple(shape), dtype=a.dtype)
+    out[..., iy[:, None], ix[None, :]] = a
+    return out
+
+
+# ------------------------------------------------------------ the two models
+def lenslet_case(optics: Optics, lenslet: Lenslet) -> str:
+    """'inside' (sub-aperture within the source disk: defocus contrast only), 'straddling'
+    (DPC-like) or 'outside' (dark field), DESIGN.md §4.2."""
+    d = math.hypot(*lenslet.u)
+    rho, rs = optics.subaperture_radius, optics.source_radius
+    if d + rho <= rs:
+        return "inside"
+    if d - rho >= rs:
+        return "outside"
+    return "straddling"
+
+
+def _frequency_steps(shape, pixel_um):
+    return tuple(1.0 / (n * pixel_um) for n in shape)
+
+
+def lenslet_transfer_functions(optics: Optics, lenslets, shape, pixel_um, z_um=0.0, oversample=1):
+    """(H_abs, H_phase) of each lenslet (K, [Z,] ny, nx) and their I0 (K,): full condenser disk,
+    sub-aperture P_obj·circ_k (DESIGN.md §4.1). ``oversample`` samples the pupil r times finer
+    than the output grid (r = 1 is within 0.1% of the exact integral for the paper's optics)."""
+    setup = _LensletSetup(optics, lenslets, shape, pixel_um, oversample)
+    zs = np.atleast_1d(np.asarray(z_um, dtype=float))
+    h_abs, h_phase = (setup.embed(h) for h in setup.band(zs))  # (Z, K, ny, nx)
+    if np.ndim(z_um) == 0:
+        return h_abs[0], h_phase[0], setup.i0
+    return np.swapaxes(h_abs, 0, 1), np.swapaxes(h_phase, 0, 1), setup.i0
+
+
+class _LensletSetup:
+    """Sub-aperture grids of every lenslet, centred on u_k, and the output band |u| <= 2ρ."""
+
+    def __init__(self, optics: Optics, lenslets, shape, pixel_um, oversample=1):
+        self.lenslets = list(lenslets)
+        if not self.lenslets:
+            raise SsdpcError("no lenslets; calibrate the lattice first")
+        self.shape = tuple(int(n) for n in shape)
+        self.r = r = int(oversample)
+        if r < 1:
+            raise SsdpcError(f"oversample must be >= 1, got {oversample}")
+        coarse = _frequency_steps(self.shape, pixel_um)
+        self.du = du = tuple(d / r for d in coarse)
+        rho = optics.subaperture_radius
+        m_in = tuple(2 * int(math.ceil(rho / d)) + 4 for d in du)
+        self.m_out = tuple(min(n, 2 * int(math.ceil(2 * rho / d)) + 3) for n, d in zip(self.shape, coarse))
+        src, pup, eta = [], [], []
+        for ln in self.lenslets:
+            p, ux, uy = subaperture_pupil(optics, ln.u, m_in, du)
+            src.append(soft_disk(np.hypot(ux, uy), optics.source_radius, math.sqrt(du[0] * du[1])))
+            pup.append(p)
+            eta.append(axial_frequency(ux, uy, optics))
+        self.src, self.pup, self.eta = np.stack(src), np.stack(pup), np.stack(eta)
+        self.norm = _disk_power(optics.source_radius, du)
+        self.i0 = _binary_background(self.src, self.pup, self.norm)
+
+    def band(self, zs):
+        """(H_abs, H_phase) (Z, K, my, mx) on the band grid for the depths ``zs`` (1D)."""
+        r, m_out = self.r, self.m_out
+        fine = tuple(m * r for m in m_out)
+        h_abs, h_phase = weak_object_transfer_functions(self.src, self.pup, zs, self.eta, fine, self.norm)
+        if r > 1:  # the fine samples at multiples of r are the output grid
+            iy, ix = ((_fft_indices(m) * r) % f for m, f in zip(m_out, fine))
+            h_abs, h_phase = (h[..., iy[:, None], ix[None, :]] for h in (h_abs, h_phase))
+        h_abs[..., 0, 0] = 2 * self.i0
+        return h_abs, h_phase
+
+    def embed(self, h):
+        """Band grid -> output grid (zeros beyond 2ρ, where the WOTF vanishes)."""
+        return h if h.shape[-2:] == self.shape else _embed(h, self.shape)
+
+
+def _binary_background(src, pupil, norm):
+    """I0 = ∫ S |P|² / ∫ S for a 0/1 pupil whose edge samples hold area fractions a: the cell
+    average of |P|² is a, not a² (a² would lose ~du/(3ρ), 1.6% for a paper sub-aperture)."""
+    return np.sum(src * np.abs(pupil), axis=(-2, -1)) / norm
+
+
+def _disk_power(radius, du):
+    """Power of a uniform disk source in grid samples (its area / du²)."""
+    return math.pi * radius**2 / (du[0] * du[1])
+
+
+def paper_transfer_functions(optics: Optics, shape, pixel_um, z_um=0.0):
+    """{half: (H_abs, H_phase, I0)} of paper Eq. 4: half of the condenser disk, full pupil."""
+    du = _frequency_steps(shape, pixel_um)
+    r = optics.cutoff
+    m_in = tuple(2 * int(math.ceil(r / d)) + 4 for d in du)
+    fy = (_fft_indices(m_in[0]) * du[0])[:, None]
+    fx = (_fft_indices(m_in[1]) * du[1])[None, :]
+    step = math.sqrt(du[0] * du[1])
+    disk = soft_disk(np.hypot(fx, fy), optics.source_radius, step)
+    pupil = soft_disk(np.hypot(fx, fy), r, step).astype(complex)
+    eta = axial_frequency(fx, fy, optics)
+    norm = _disk_power(optics.source_radius, du)
+    # "up" sees u_y > 0 (DESIGN.md §3); the half-plane edge gets half weight
+    sides = {"up": fy / du[0], "down": -fy / du[0], "left": fx / du[1], "right": -fx / du[1]}
+    out = {}
+    for half, coord in sides.items():
+        src = disk * np.clip(0.5 + coord, 0.0, 1.0)
+        h_abs, h_phase = weak_object_transfer_functions(src, pupil, z_um, eta, shape, norm)
+        i0 = float(_binary_background(src, pupil, norm))
+        h_abs[..., 0, 0] = 2 * i0
+        out[half] = (h_abs, h_phase, i0)
+    return out
+
+
+# --------------------------------------------------------------- DPC operators
+def dpc_transfer_functions(
+    optics: Optics, lenslets=None, shape=(145, 145), pixel_um=None, z_um=0.0, model=None, warn=True
+) -> dict:
+    """Transfer functions of the four halves and of the two DPC images on a z grid.
+
+    Returns a dict with
+      'H_abs', 'H_phase': {half: (ny, nx) or (Z, ny, nx) complex64}, unshifted FFT order,
+      'I0': {half: float} (fraction of the condenser light the half collects),
+      'dpc_phase', 'dpc_abs': {'ud'|'lr': ...} first-order TFs of (I1 − I2)/(I1 + I2),
+      'dpc_offset': {'ud'|'lr': (I0_1 − I0_2)/(I0_1 + I0_2)},
+      'contrast': {'ud'|'lr': in-focus peak |H_DPC|}, 'cases': lenslet cases (lenslet model),
+      'freq': (fy, fx) cycles/µm, 'z_um', 'model'.
+    Warns (SsdpcWarning) when the in-focus phase contrast is too weak to invert.
+    """
+    model = model or optics.reconstruction.get("model", "lenslet")
+    if model not in ("lenslet", "paper"):
+        raise SsdpcError(f"unknown transfer model '{model}'; use 'lenslet' or 'paper'")
+    if not optics.condenser_na > 0:
+        raise SsdpcError("condenser_na is 0: a point source gives no DPC; set the condenser NA in the optics file")
+    pixel_um = float(pixel_um or optics.object_pixel_um)
+    shape = tuple(int(n) for n in shape)
+    lenslets = list(optics.lenslets() if lenslets is None else lenslets)
+    zs = np.asarray(z_um, dtype=float)
+    out = {
+        "model": model,
+        "z_um": zs,
+        "freq": tuple(sfft.fftfreq(n, pixel_um) for n in shape),
+        "H_abs": {},
+        "H_phase": {},
+        "I0": {},
+    }
+    if model == "paper":
+        for half, (ha, hp, i0) in paper_transfer_functions(optics, shape, pixel_um, zs).items():
+            out["H_abs"][half], out["H_phase"][half], out["I0"][half] = ha, hp, i0
+        focus = (
+            out["H_phase"]
+            if _in_focus(zs)
+            else {h: v[1] for h, v in paper_transfer_functions(optics, shape, pixel_um, 0.0).items()}
+        )
+    else:
+        setup = _LensletSetup(optics, lenslets, shape, pixel_um)
+        members = {h: np.array([h in ln.halves for ln in setup.lenslets]) for h in HALVES}
+        out["H_abs"], out["H_phase"] = _half_sums(setup, members, zs)
+        out["I0"] = {h: float(setup.i0[sel].sum()) for h, sel in members.items()}
+        focus = out["H_phase"] if _in_focus(zs) else _half_sums(setup, members, np.asarray(0.0))[1]
+        out["cases"] = [lenslet_case(optics, ln) for ln in setup.lenslets]
+    out["dpc_phase"], out["dpc_abs"], out["dpc_offset"], out["contrast"] = {}, {}, {}, {}
+    for axis, (h1, h2) in AXES.items():
+        a1, a2 = out["I0"][h1], out["I0"][h2]
+        if not a1 + a2 > 0:
+            raise SsdpcError(
+                f"no direct light reaches the {h1}/{h2} halves; open the condenser or check the lenslet list"
+            )
+        out["dpc_phase"][axis] = dpc_from_halves(out["H_phase"][h1], out["H_phase"][h2], a1, a2)
+        out["dpc_abs"][axis] = dpc_from_halves(out["H_abs"][h1], out["H_abs"][h2], a1, a2)
+        out["dpc_offset"][axis] = (a1 - a2) / (a1 + a2)
+        out["contrast"][axis] = float(np.abs(dpc_from_halves(focus[h1], focus[h2], a1, a2)).max())
+    if warn:
+        _warn_weak(optics, out)
+    return out
+
+
+def dpc_from_halves(h1, h2, i0_1, i0_2):
+    """First-order TF of (I1 − I2)/(I1 + I2) from the halves' TFs and backgrounds:
+    2 (I0_2 H_1 − I0_1 H_2)/(I0_1 + I0_2)², i.e. H_1/I0_1 for mirror-image halves."""
+    return (2.0 * (i0_2 * h1 - i0_1 * h2) / (i0_1 + i0_2) ** 2).astype(np.complex64)
+
+
+def _half_sums(setup: _LensletSetup, members: dict, zs, chunk=16):
+    """{half: Σ_k H_k} for H_abs and H_phase, in chunks of z (the per-lenslet TFs stay small)."""
+    z1 = np.atleast_1d(zs)
+    sums = [{h: np.empty((len(z1),) + setup.shape, np.complex64) for h in members} for _ in range(2)]
+    for i in range(0, len(z1), chunk):
+        bands = setup.band(z1[i : i + chunk])
+        for total, band in zip(sums, bands):
+            for h, sel in members.items():
+                total[h][i : i + chunk] = setup.embed(band[:, sel].sum(axis=1))
+    if zs.ndim == 0:
+        sums = [{h: v[0] for h, v in total.items()} for total in sums]
+    return sums[0], sums[1]
+
+
+def _in_focus(zs) -> bool:
+    return zs.ndim == 0 and float(zs) == 0.0
+
+
+def _warn_weak(optics: Optics, out: dict) -> None:
+    weakest = min(out["contrast"].values())
+    if out["model"] == "lenslet" and "straddling" not in out["cases"]:
+        warnings.warn(
+            f"no lenslet sub-aperture straddles the edge of the source disk (condenser_na {optics.condenser_na}): "
+            "in-focus phase contrast is weak; change the condenser NA so that the source edge crosses the "
+            "central lenslets",
+            SsdpcWarning,
+            stacklevel=3,
+        )
+    elif weakest < WEAK_CONTRAST:
+        warnings.warn(
+            f"in-focus DPC phase transfer peaks at {weakest:.3f} (< {WEAK_CONTRAST}) for condenser_na "
+            f"{optics.condenser_na} (sigma {optics.sigma:.2f}): phase contrast is too weak to invert; "
+            "close the condenser aperture",
+            SsdpcWarning,
+            stacklevel=3,
+        )

@@ -1,0 +1,134 @@
+"""Array backend: NumPy on the CPU (default), CuPy on a CUDA GPU when asked and present (DESIGN.md §2).
+
+The reconstruction code takes a :class:`Backend` and writes ``bk.xp`` where it would write ``np``
+and ``bk.rfft2(...)`` where it would write ``scipy.fft.rfft2(...)``; the same lines then run on
+either device. Arrays made by ``bk.xp`` stay on the device until ``bk.to_host`` copies them back,
+so the Richardson–Lucy iterations never leave the GPU.
+
+    bk = get_backend("gpu")        # SsdpcError with the fix when CuPy or a GPU is missing
+    a = bk.asarray(views)          # host -> device (a no-op on the CPU)
+    spec = bk.rfft2(a)             # scipy.fft (threads) or cupyx.scipy.fft (cuFFT)
+    out = bk.to_host(spec)         # device -> host (a no-op on the CPU)
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from napari_ssdpc.errors import SsdpcError
+
+DEVICES = ("cpu", "gpu")
+GPU_INSTALL = "pip install 'napari-ssdpc[gpu]' (CuPy for CUDA 12)"
+
+
+@dataclass(frozen=True)
+class Backend:
+    """One device: its array module ``xp`` and FFT module ``fft``."""
+
+    device: str  # 'cpu' or 'gpu'
+    xp: object  # numpy or cupy
+    fft: object  # scipy.fft or cupyx.scipy.fft
+    workers: int = -1  # scipy.fft threads (CPU only)
+    name: str = ""  # what it runs on, for reports
+
+    def __reduce__(self):  # modules do not pickle: rebuild on the other side
+        return (get_backend, (self.device, self.workers))
+
+    @property
+    def is_gpu(self) -> bool:
+        return self.device == "gpu"
+
+    # ----------------------------------------------------------- transfers
+    def asarray(self, a, dtype=None):
+        """``a`` on this device (no copy when it is already there with that dtype)."""
+        return self.xp.asarray(a, dtype=dtype)
+
+    def to_host(self, a):
+        """A NumPy array of ``a`` (a device -> host copy on the GPU)."""
+        if self.is_gpu and not isinstance(a, np.ndarray):
+            return self.xp.asnumpy(a)
+        return np.asarray(a)
+
+    def synchronize(self) -> None:
+        """Wait for queued device work (for honest timings on the GPU)."""
+        if self.is_gpu:
+            self.xp.cuda.get_current_stream().synchronize()
+
+    # ----------------------------------------------------------------- FFT
+    def _kw(self):
+        return {"workers": self.workers} if not self.is_gpu else {}
+
+    def rfft2(self, a, s=None):
+        return self.fft.rfft2(a, s=s, **self._kw())
+
+    def irfft2(self, a, s):
+        return self.fft.irfft2(a, s=s, **self._kw())
+
+    def rfft(self, a, axis=-1):
+        return self.fft.rfft(a, axis=axis, **self._kw())
+
+    def irfft(self, a, n, axis=-1):
+        return self.fft.irfft(a, n=n, axis=axis, **self._kw())
+
+    def fft_(self, a, n=None, axis=-1):
+        return self.fft.fft(a, n=n, axis=axis, **self._kw())
+
+    def ifft(self, a, n=None, axis=-1):
+        return self.fft.ifft(a, n=n, axis=axis, **self._kw())
+
+
+def _cpu(workers=-1) -> Backend:
+    import platform
+
+    import scipy.fft
+
+    return Backend("cpu", np, scipy.fft, workers, f"NumPy/SciPy on {platform.processor() or platform.machine()}")
+
+
+def _import(name):
+    """Import hook (tests replace it to simulate a missing CuPy)."""
+    return importlib.import_module(name)
+
+
+def _gpu() -> Backend:
+    try:
+        cp = _import("cupy")
+        cufft = _import("cupyx.scipy.fft")
+    except ImportError:
+        raise SsdpcError(
+            f"--device gpu needs CuPy, which is not installed; {GPU_INSTALL}, or use --device cpu"
+        ) from None
+    try:
+        n = int(cp.cuda.runtime.getDeviceCount())
+    except Exception:  # CuPy raises its own CUDARuntimeError when the driver is missing
+        n = 0
+    if n < 1:
+        raise SsdpcError("--device gpu: CuPy found no CUDA GPU (check the driver with nvidia-smi), or use --device cpu")
+    try:
+        props = cp.cuda.runtime.getDeviceProperties(cp.cuda.Device().id)
+        name = props["name"].decode() if isinstance(props["name"], bytes) else str(props["name"])
+    except Exception:
+        name = "CUDA GPU"
+    return Backend("gpu", cp, cufft, -1, f"CuPy on {name}")
+
+
+def get_backend(device: str | Backend | None = "cpu", workers: int = -1) -> Backend:
+    """The backend of ``device`` ('cpu' or 'gpu'; a Backend is returned as it is)."""
+    if isinstance(device, Backend):
+        return device
+    device = "cpu" if device is None else str(device).lower()
+    if device not in DEVICES:
+        raise SsdpcError(f"unknown device '{device}'; use one of {', '.join(DEVICES)}")
+    return _gpu() if device == "gpu" else _cpu(workers)
+
+
+def gpu_available() -> bool:
+    """True when CuPy is installed and sees at least one CUDA GPU."""
+    try:
+        _gpu()
+    except SsdpcError:
+        return False
+    return True

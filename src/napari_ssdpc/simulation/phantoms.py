@@ -1,0 +1,374 @@
+"""Analytic refractive-index phantoms for the simulator and the tests.
+
+Every phantom is a frozen dataclass with an analytic ground truth
+``delta_n(z, y, x)`` (complex: the real part is n - n_medium, the imaginary part is
+the absorption index κ, so a field of vacuum wavelength λ is damped as
+``exp(-2π κ t / λ)`` over a length t), its extent (``z_range``, ``xy_box``), and two
+partial-volume (anti-aliased) voxelisers used by the simulator and by tests:
+
+- ``slab(z0, z1, y, x, pixel_um)``: ∫ Δn dz over [z0, z1] (µm), averaged over square
+  pixels of side ``pixel_um`` centred on the 1D coordinates ``y``, ``x``;
+- ``volume(z, y, x)``: the voxel average of Δn on a regular (z, y, x) grid.
+
+Positions are (x, y, z) in µm; z > 0 is farther from the objective (DESIGN.md §3).
+
+The medium: ``medium_index=None`` means "the medium of the optics" (the simulator
+fills it in and returns the bound phantom as ``Simulation.phantom``). A phantom with a
+``medium_index`` (for example ``cell()`` in water, 1.33) makes ``simulate`` use
+``optics.replace(medium_index=phantom.medium_index)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from napari_ssdpc.errors import SsdpcError
+
+
+# ----------------------------------------------------------------------------- primitives
+@dataclass(frozen=True)
+class Ellipsoid:
+    """Ellipsoid with constant complex Δn, semi-axes (a, b, c) along x', y', z;
+    x', y' are x, y rotated by ``angle_deg`` about z."""
+
+    center_um: tuple[float, float, float]
+    semi_axes_um: tuple[float, float, float]
+    dn: complex
+    angle_deg: float = 0.0
+
+    def _lateral_q(self, y, x):
+        cx, cy, _ = self.center_um
+        a, b, _ = self.semi_axes_um
+        t = math.radians(self.angle_deg)
+        dx, dy = x - cx, y - cy
+        xr = dx * math.cos(t) + dy * math.sin(t)
+        yr = -dx * math.sin(t) + dy * math.cos(t)
+        return (xr / a) ** 2 + (yr / b) ** 2
+
+    def delta_n(self, z, y, x):
+        z, y, x = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (z, y, x)))
+        c, cz = self.semi_axes_um[2], self.center_um[2]
+        inside = self._lateral_q(y, x) + ((z - cz) / c) ** 2 <= 1.0
+        return np.where(inside, complex(self.dn), 0j)
+
+    def z_range(self):
+        return self.center_um[2] - self.semi_axes_um[2], self.center_um[2] + self.semi_axes_um[2]
+
+    def xy_box(self):
+        a, b, _ = self.semi_axes_um
+        t = math.radians(self.angle_deg)
+        hx = math.hypot(a * math.cos(t), b * math.sin(t))
+        hy = math.hypot(a * math.sin(t), b * math.cos(t))
+        cx, cy, _ = self.center_um
+        return cx - hx, cx + hx, cy - hy, cy + hy
+
+    def slab(self, z0, z1, y, x, pixel_um, supersample=4):
+        """Pixel-averaged ∫Δn dz over [z0, z1]: exact chord in z, supersampled laterally."""
+        out = np.zeros((len(y), len(x)), dtype=np.complex128)
+        zlo, zhi = self.z_range()
+        if z1 <= zlo or z0 >= zhi:
+            return out
+        ys, xs = _window(y, x, self.xy_box(), pixel_um)
+        if ys.stop <= ys.start or xs.stop <= xs.start:
+            return out
+        c, cz = self.semi_axes_um[2], self.center_um[2]
+        offs = ((np.arange(supersample) + 0.5) / supersample - 0.5) * pixel_um
+        acc = np.zeros((ys.stop - ys.start, xs.stop - xs.start))
+        yy, xx = np.asarray(y)[ys], np.asarray(x)[xs]
+        for oy in offs:
+            for ox in offs:
+                q = self._lateral_q((yy + oy)[:, None], (xx + ox)[None, :])
+                h = c * np.sqrt(np.clip(1.0 - q, 0.0, None))
+                length = np.minimum(z1, cz + h) - np.maximum(z0, cz - h)
+                acc += np.where(q < 1.0, np.clip(length, 0.0, None), 0.0)
+        out[ys, xs] = acc * (complex(self.dn) / supersample**2)
+        return out
+
+
+@dataclass(frozen=True)
+class Box:
+    """Axis-aligned box with constant complex Δn (exact partial-volume voxelisation)."""
+
+    center_um: tuple[float, float, float]
+    size_um: tuple[float, float, float]
+    dn: complex
+
+    def delta_n(self, z, y, x):
+        z, y, x = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (z, y, x)))
+        inside = np.ones(z.shape, dtype=bool)
+        for v, c, s in zip((x, y, z), self.center_um, self.size_um):
+            inside &= np.abs(v - c) <= s / 2
+        return np.where(inside, complex(self.dn), 0j)
+
+    def z_range(self):
+        return self.center_um[2] - self.size_um[2] / 2, self.center_um[2] + self.size_um[2] / 2
+
+    def xy_box(self):
+        (cx, cy, _), (sx, sy, _) = self.center_um, self.size_um
+        return cx - sx / 2, cx + sx / 2, cy - sy / 2, cy + sy / 2
+
+    def slab(self, z0, z1, y, x, pixel_um, supersample=4):
+        zlo, zhi = self.z_range()
+        length = max(0.0, min(z1, zhi) - max(z0, zlo))
+        fx = _interval_fraction(np.asarray(x, float), pixel_um, self.center_um[0], self.size_um[0])
+        fy = _interval_fraction(np.asarray(y, float), pixel_um, self.center_um[1], self.size_um[1])
+        return (length * complex(self.dn)) * np.outer(fy, fx)
+
+
+def _interval_fraction(c, pixel, center, size):
+    """Fraction of the pixels [c - p/2, c + p/2] covered by [center - size/2, center + size/2]."""
+    lo = np.maximum(c - pixel / 2, center - size / 2)
+    hi = np.minimum(c + pixel / 2, center + size / 2)
+    return np.clip(hi - lo, 0.0, None) / pixel
+
+
+def _window(y, x, box, pixel):
+    """Index slices of the 1D coordinates that can touch the lateral box."""
+    x0, x1, y0, y1 = box
+    x, y = np.asarray(x), np.asarray(y)
+    xs = slice(int(np.searchsorted(x, x0 - pixel)), int(np.searchsorted(x, x1 + pixel, side="right")))
+    ys = slice(int(np.searchsorted(y, y0 - pixel)), int(np.searchsorted(y, y1 + pixel, side="right")))
+    return ys, xs
+
+
+# ------------------------------------------------------------------------------ phantoms
+class Phantom:
+    """Base class: a sum of primitives with Δn relative to the medium."""
+
+    medium_index: float | None = None
+    needs_medium = True  # False: Δn is given relative to any medium (Composite, BarTarget)
+
+    def parts(self, medium_index: float) -> list:
+        raise NotImplementedError
+
+    def medium(self, medium_index=None) -> float:
+        n = self.medium_index if self.medium_index is not None else medium_index
+        if n is None and not self.needs_medium:
+            return float("nan")
+        if n is None:
+            raise SsdpcError(
+                f"{type(self).__name__} has no medium_index; pass medium_index=... "
+                "(or use Simulation.phantom, which the simulator binds to the optics' medium)"
+            )
+        return float(n)
+
+    def with_medium(self, medium_index: float) -> Phantom:
+        """A copy bound to ``medium_index`` (kept if the phantom already has one)."""
+        if self.medium_index is not None:
+            return self
+        return replace(self, medium_index=float(medium_index))
+
+    def _parts(self, medium_index=None):
+        return self.parts(self.medium(medium_index))
+
+    def delta_n(self, z, y, x, medium_index=None) -> np.ndarray:
+        """Analytic complex Δn at points (z, y, x) µm (broadcast)."""
+        shape = np.broadcast_shapes(np.shape(z), np.shape(y), np.shape(x))
+        out = np.zeros(shape, dtype=np.complex128)
+        for p in self._parts(medium_index):
+            out += p.delta_n(z, y, x)
+        return out
+
+    def z_range(self, medium_index=1.0) -> tuple[float, float]:
+        """(z_min, z_max) µm of the sample (the z extent)."""
+        rs = [p.z_range() for p in self.parts(self._any_medium(medium_index))]
+        return min(r[0] for r in rs), max(r[1] for r in rs)
+
+    def xy_box(self, medium_index=1.0) -> tuple[float, float, float, float]:
+        """Lateral bounding box (x_min, x_max, y_min, y_max) µm."""
+        bs = [p.xy_box() for p in self.parts(self._any_medium(medium_index))]
+        return (min(b[0] for b in bs), max(b[1] for b in bs), min(b[2] for b in bs), max(b[3] for b in bs))
+
+    def _any_medium(self, medium_index):
+        return self.medium_index if self.medium_index is not None else medium_index
+
+    def slab(self, z0, z1, y, x, pixel_um, medium_index=None, supersample=4) -> np.ndarray:
+        """∫ Δn dz over [z0, z1] (µm), averaged over pixels of side ``pixel_um``."""
+        out = np.zeros((len(y), len(x)), dtype=np.complex128)
+        for p in self._parts(medium_index):
+            out += p.slab(z0, z1, y, x, pixel_um, supersample)
+        return out
+
+    def volume(self, z_um, y_um, x_um, medium_index=None, supersample=4) -> np.ndarray:
+        """Partial-volume voxel averages of Δn on the regular grid (z, y, x), complex."""
+        z, y, x = (np.asarray(v, dtype=float) for v in (z_um, y_um, x_um))
+        dz = float(z[1] - z[0]) if len(z) > 1 else 1.0
+        dx = float(x[1] - x[0]) if len(x) > 1 else 1.0
+        dy = float(y[1] - y[0]) if len(y) > 1 else dx
+        if not math.isclose(dx, dy, rel_tol=1e-6):
+            raise SsdpcError("volume() needs the same x and y spacing; resample one axis")
+        return np.stack([self.slab(zi - dz / 2, zi + dz / 2, y, x, dx, medium_index, supersample) / dz for zi in z])
+
+
+@dataclass(frozen=True)
+class Composite(Phantom):
+    """Any sum of primitives (``Ellipsoid``, ``Box``) whose ``dn`` is already relative to the medium."""
+
+    items: tuple = ()
+    medium_index: float | None = None
+    needs_medium = False
+
+    def parts(self, medium_index):
+        if not self.items:
+            raise SsdpcError("Composite phantom is empty; give it Ellipsoid/Box items")
+        return list(self.items)
+
+
+@dataclass(frozen=True)
+class Sphere(Phantom):
+    """Homogeneous sphere of (complex) index ``n``; default = the paper's 13 µm PMMA bead."""
+
+    center_um: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    diameter_um: float = 13.0
+    n: complex = 1.49
+    medium_index: float | None = None
+
+    def __post_init__(self):
+        if not self.diameter_um > 0:
+            raise SsdpcError(f"Sphere diameter_um must be > 0, got {self.diameter_um}")
+
+    def parts(self, medium_index):
+        r = self.diameter_um / 2
+        return [Ellipsoid(tuple(map(float, self.center_um)), (r, r, r), complex(self.n) - medium_index)]
+
+
+@dataclass(frozen=True)
+class Spheres(Phantom):
+    """Several non-overlapping spheres in one medium (the spheres' own medium is ignored)."""
+
+    spheres: tuple = ()
+    medium_index: float | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "spheres", tuple(self.spheres))
+        if not self.spheres:
+            raise SsdpcError("Spheres needs at least one Sphere")
+
+    def parts(self, medium_index):
+        return [p for s in self.spheres for p in s.parts(medium_index)]
+
+
+@dataclass(frozen=True)
+class Cell(Phantom):
+    """Ellipsoidal cell (index ``n``) with an ellipsoidal nucleus or inclusion (``n_nucleus``).
+
+    The nucleus offset is given in the cell's own (rotated) frame; it must lie inside
+    the cell (the two Δn add up: cytoplasm n - n_medium, nucleus n_nucleus - n)."""
+
+    center_um: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    semi_axes_um: tuple[float, float, float] = (12.0, 8.0, 5.0)
+    n: complex = 1.37
+    nucleus_offset_um: tuple[float, float, float] = (2.0, 0.5, 0.0)
+    nucleus_semi_axes_um: tuple[float, float, float] = (4.5, 4.0, 3.0)
+    n_nucleus: complex = 1.39
+    angle_deg: float = 0.0
+    medium_index: float | None = 1.33
+
+    def parts(self, medium_index):
+        t = math.radians(self.angle_deg)
+        ox, oy, oz = self.nucleus_offset_um
+        cx, cy, cz = self.center_um
+        nc = (cx + ox * math.cos(t) - oy * math.sin(t), cy + ox * math.sin(t) + oy * math.cos(t), cz + oz)
+        return [
+            Ellipsoid(
+                tuple(map(float, self.center_um)),
+                tuple(self.semi_axes_um),
+                complex(self.n) - medium_index,
+                self.angle_deg,
+            ),
+            Ellipsoid(nc, tuple(self.nucleus_semi_axes_um), complex(self.n_nucleus) - complex(self.n), self.angle_deg),
+        ]
+
+
+@dataclass(frozen=True)
+class BarTarget(Phantom):
+    """Thin absorbing USAF-like target at depth ``z_um``.
+
+    One element per period: three vertical bars (varying along x) above three
+    horizontal bars (varying along y), line width = period / 2, bar length = 5 line
+    widths; elements sit side by side along x, centred on ``center_um`` (x, y).
+    The bars transmit ``transmittance`` of the intensity (Δn = i κ with
+    κ = -ln(T) λ / (4π t), for λ = ``wavelength_um``) and add ``phase_rad`` of phase."""
+
+    period_um: tuple = (8.76, 6.2, 4.92, 4.38)
+    z_um: float = 40.0
+    thickness_um: float = 0.5
+    transmittance: float = 0.1
+    phase_rad: float = 0.0
+    wavelength_um: float = 0.52
+    center_um: tuple[float, float] = (0.0, 0.0)
+    medium_index: float | None = None
+    needs_medium = False
+
+    def __post_init__(self):
+        p = self.period_um
+        object.__setattr__(self, "period_um", tuple(float(v) for v in (p if np.ndim(p) else (p,))))
+        if not 0 < self.transmittance <= 1:
+            raise SsdpcError(f"BarTarget transmittance must be in (0, 1], got {self.transmittance}")
+
+    def parts(self, medium_index):
+        t, lam = self.thickness_um, self.wavelength_um
+        dn = self.phase_rad * lam / (2 * math.pi * t) + 1j * (-math.log(self.transmittance) * lam / (4 * math.pi * t))
+        widths = [p * 2.5 for p in self.period_um]  # element width = 5 line widths
+        gap = max(self.period_um)
+        total = sum(widths) + gap * (len(widths) - 1)
+        x = self.center_um[0] - total / 2
+        out = []
+        for p, wdt in zip(self.period_um, widths):
+            lw, length = p / 2, 2.5 * p
+            xc = x + wdt / 2
+            for i in (-1, 0, 1):
+                out.append(Box((xc + i * p, self.center_um[1] - length / 2 - gap / 4, self.z_um), (lw, length, t), dn))
+                out.append(Box((xc, self.center_um[1] + length / 2 + gap / 4 + i * p, self.z_um), (length, lw, t), dn))
+            x += wdt + gap
+        return out
+
+
+# ---------------------------------------------------------------------------- factories
+def pmma_bead(center_um=(0.0, 0.0, 0.0)) -> Sphere:
+    """The paper's bead: 13 µm PMMA (n 1.49) in oil of index 1.518 (§3.2)."""
+    return Sphere(tuple(center_um), 13.0, 1.49, medium_index=1.518)
+
+
+def two_beads() -> Spheres:
+    """Two 6 µm beads (n 1.56) in 1.518, at z = -25 µm and z = +30 µm, 40 µm apart in x."""
+    return Spheres((Sphere((-20.0, 0.0, -25.0), 6.0, 1.56), Sphere((20.0, 0.0, 30.0), 6.0, 1.56)), medium_index=1.518)
+
+
+def cell(**kw) -> Cell:
+    """A cell (n 1.37) with a nucleus (n 1.39) in water (1.33); keywords override ``Cell`` fields."""
+    return Cell(**kw)
+
+
+def bar_target(period_um=(8.76, 6.2, 4.92, 4.38), z_um=40.0, **kw) -> BarTarget:
+    """Thin absorbing USAF-like target; the paper resolves 4.38 µm periods (group 7 element 6)."""
+    return BarTarget(period_um=period_um, z_um=z_um, **kw)
+
+
+def moving_sample(
+    n_frames, start_um=(-35.0, -10.0, -10.0), end_um=(35.0, 10.0, 10.0), turn_deg=60.0, **kw
+) -> list[Cell]:
+    """A swimmer: an ellipsoid (n 1.36, 9 x 5 x 4 µm semi-axes) with a 2 µm inclusion
+    (n 1.42) moving in a straight line from ``start_um`` to ``end_um`` while it turns by
+    ``turn_deg``, in water; one phantom per frame."""
+    if int(n_frames) < 1:
+        raise SsdpcError(f"moving_sample needs n_frames >= 1, got {n_frames}")
+    base = dict(
+        semi_axes_um=(9.0, 5.0, 4.0),
+        n=1.36,
+        nucleus_offset_um=(4.0, 0.0, 0.0),
+        nucleus_semi_axes_um=(2.0, 2.0, 2.0),
+        n_nucleus=1.42,
+        medium_index=1.33,
+    )
+    base.update(kw)
+    s, e = np.asarray(start_um, float), np.asarray(end_um, float)
+    out = []
+    for i in range(int(n_frames)):
+        f = i / max(int(n_frames) - 1, 1)
+        c = s + f * (e - s)
+        out.append(Cell(center_um=tuple(float(v) for v in c), angle_deg=float(f * turn_deg), **base))
+    return out

@@ -1,0 +1,455 @@
+"""``ssdpc bench``: time the reconstruction of the standard case and compare it with the reference path.
+
+The standard case (issue 5, docs/performance.md): the paper's optics at condenser NA 0.1, a
+simulated 13 µm PMMA bead, z from −80 to +80 µm every 1 µm (161 planes), 10 Richardson–Lucy
+iterations, the paper's route to phase (DPC stacks + Tikhonov, ``method='rl'``) and RI.
+
+Everything is measured in one process on the same input; ratios, not absolute numbers, are
+what carries over to another machine. Stages run in this order, and ``peak_rss_mb`` is the
+process's peak resident memory at the end of each stage (it only grows): fast path at NA 0.1,
+the default 'wotf' method, fast path at NA 0.3 (24 lit lenslets), the time series, then the
+reference path. Simulated frames are cached (``cache_dir``) and simulated in a child process,
+so that the simulator's memory does not count.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import platform
+import resource
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+STANDARD = {"z": (-80.0, 80.0), "dz": 1.0, "iterations": 10, "method": "rl"}
+QUICK = {"z": (-80.0, 80.0), "dz": 16.0, "iterations": 3, "method": "rl"}
+SENSOR_DZ = {False: 20.0, True: 80.0}  # planes of the sensor-canvas reference (it is slow)
+SERIES_FRAMES = {False: 4, True: 3}
+TARGETS = {"speedup": 10.0, "peak_gb": 4.0, "max_rel_diff": 1e-3}
+
+
+# ------------------------------------------------------------------- machine
+def machine() -> dict:
+    model = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.lower().startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:
+        cores = os.cpu_count()
+    mem = None
+    try:
+        mem = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30
+    except (ValueError, OSError, AttributeError):
+        pass
+    import scipy
+
+    return {
+        "cpu": model,
+        "cores": cores,
+        "memory_gb": None if mem is None else round(mem, 1),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "load_average": _load(),
+    }
+
+
+def _load():
+    try:
+        return [round(v, 2) for v in os.getloadavg()]
+    except OSError:
+        return None
+
+
+def peak_rss_mb() -> float:
+    """Peak resident memory of this process so far (MB)."""
+    r = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return r / 1024 if sys.platform != "darwin" else r / 2**20
+
+
+# -------------------------------------------------------------------- inputs
+def _simulate(name, condenser_na, frames, cache_dir):
+    from napari_ssdpc.settings.optics import Optics
+    from napari_ssdpc.simulation import phantoms
+    from napari_ssdpc.validation.cases import simulate_case
+
+    phantom = phantoms.pmma_bead() if frames is None else phantoms.moving_sample(frames)
+    return simulate_case(name, phantom, Optics.paper().replace(condenser_na=condenser_na), cache_dir=cache_dir)
+
+
+def simulated_case(name, condenser_na, cache_dir, frames=None):
+    """A cached simulated case; simulated in a child process when it is not cached yet."""
+    path = Path(cache_dir) / f"{name}_na{condenser_na:g}_s0.npz"
+    if not path.is_file():
+        import multiprocessing as mp
+
+        proc = mp.get_context("spawn").Process(target=_simulate, args=(name, condenser_na, frames, cache_dir))
+        proc.start()
+        proc.join()
+        if proc.exitcode != 0:
+            raise RuntimeError(f"simulating {name} failed (exit code {proc.exitcode})")
+    return _simulate(name, condenser_na, frames, cache_dir)
+
+
+def default_cache() -> Path:
+    return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "napari-ssdpc" / "bench"
+
+
+# ------------------------------------------------------------------- stages
+def _frame_times(rec, frame, repeats=2) -> dict:
+    """Reconstruct ``repeats`` times; the first frame (FFT plans, caches) and the last one."""
+    first = None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        res = rec.reconstruct(frame)
+        wall = time.perf_counter() - t0
+        first = wall if first is None else first
+    return {"first_frame_s": first, "frame_s": wall, **{k: v for k, v in res.timings.items()}}, res
+
+
+def fast_path(case, cal, cfg, device="cpu", stacks=True, repeats=2):
+    from napari_ssdpc.reconstruction.pipeline import Reconstructor
+
+    t0 = time.perf_counter()
+    rec = Reconstructor(case.optics, cal, flat=case.flat, device=device, stacks=stacks, **cfg)
+    build = time.perf_counter() - t0
+    frame = case.frame if case.frame.ndim == 2 else case.frame[0]
+    times, res = _frame_times(rec, frame, repeats)
+    info = {
+        "build_s": build,
+        **times,
+        "lit_lenslets": len(rec.lit),
+        "planes": len(rec.z_um),
+        "peak_rss_mb": peak_rss_mb(),
+    }
+    if hasattr(rec, "rl"):
+        info.update(fft_shape=list(rec.fft_shape), band_fraction=rec.band.fraction)
+    return rec, res, info
+
+
+def series_stage(case, cal, cfg, device, n_frames, rec=None) -> dict:
+    """Stream a TIFF series through ``ssdpc reconstruct``'s code (serial) into OME-Zarr."""
+    import tifffile
+
+    from napari_ssdpc.io.series import Recipe, reconstruct_series
+
+    frames = case.frame if case.frame.ndim == 3 else np.stack([case.frame] * n_frames)
+    recipe = Recipe(case.optics, cal, {**cfg, "device": device, "stacks": True}, case.flat)
+    with tempfile.TemporaryDirectory(prefix="ssdpc-bench-") as tmp:
+        src = Path(tmp) / "series.tif"
+        tifffile.imwrite(src, frames, photometric="minisblack")
+        t0 = time.perf_counter()
+        rec = recipe.build() if rec is None else rec
+        build = time.perf_counter() - t0
+        rep = reconstruct_series(src, Path(tmp) / "out.zarr", recipe, rec=rec, progress=False)
+    steady = rep.timings[1:] or rep.timings  # the first frame pays for the FFT plans
+    mean = {k: float(np.mean([t[k] for t in steady])) for k in ("read_s", "reconstruct_s", "write_s")}
+    wall = sum(t["read_s"] + t["reconstruct_s"] + t["write_s"] for t in steady)
+    return {
+        "frames": rep.frames,
+        "build_s": build,
+        "seconds": rep.seconds,
+        "frames_per_s": rep.frames_per_second,
+        "steady_frames_per_s": len(steady) / wall,
+        **mean,
+        "peak_rss_mb": peak_rss_mb(),
+    }
+
+
+def reference_stage(rec, res_fast, frame, canvas, fast_full=None) -> dict:
+    """The reference path on the Reconstructor's own z grid; speed-up and largest differences."""
+    from napari_ssdpc.validation.reference import max_relative_difference, reconstruct_reference
+
+    ref = reconstruct_reference(rec, frame, canvas=canvas)
+    per_frame = sum(ref.timings[k] for k in ("preprocess_s", "rl_s", "dpc_s", "phase_s"))
+    fast = sum(res_fast.timings[k] for k in ("preprocess_s", "rl_s", "dpc_s", "phase_s"))
+    out = {
+        "canvas": list(ref.layout.shape),
+        "canvas_vs_view_grid": ref.layout.area_ratio,
+        "planes": len(rec.z_um),
+        "build_s": ref.timings["build_s"],
+        "rl_s": ref.timings["rl_s"],
+        "frame_s": per_frame,
+        "fast_frame_s": fast,
+        "speedup": per_frame / fast,
+        "max_rel_diff_stacks": max(max_relative_difference(res_fast.stacks[h], ref.stacks[h]) for h in ref.stacks),
+        "max_rel_diff_delta_n": max_relative_difference(res_fast.delta_n, ref.delta_n),
+        "peak_rss_mb": peak_rss_mb(),
+    }
+    if fast_full is not None:
+        # whole-sensor FFTs per plane: 2Z + 2 per iteration and half; scale the measured RL time
+        z, zf = len(rec.z_um), fast_full["planes"]
+        rl_full = ref.timings["rl_s"] * (2 * zf + 2) / (2 * z + 2)
+        full = per_frame - ref.timings["rl_s"] + rl_full
+        fast_f = sum(fast_full[k] for k in ("preprocess_s", "rl_s", "dpc_s", "phase_s"))
+        out.update(extrapolated_planes=zf, extrapolated_frame_s=full, extrapolated_speedup=full / fast_f)
+    return out
+
+
+# --------------------------------------------------------------------- driver
+def run_bench(
+    *,
+    quick=False,
+    device="cpu",
+    cache_dir=None,
+    reference=True,
+    log=None,
+    case=None,
+    series_case=None,
+    high_na_case=None,
+) -> dict:
+    """Run every stage and return the report (a JSON-able dict). ``case`` / ``series_case`` /
+    ``high_na_case`` replace the simulated inputs (tests); ``high_na_case=False`` skips NA 0.3."""
+    from napari_ssdpc.calibration.calibrate import calibrate
+    from napari_ssdpc.reconstruction.backend import get_backend
+
+    get_backend(device)  # a missing GPU stops here, before any work
+    say = log or (lambda m: None)
+    cache = Path(cache_dir) if cache_dir else default_cache()
+    cfg = dict(QUICK if quick else STANDARD)
+    report = {"machine": machine(), "device": device, "quick": bool(quick), "stages": {}}
+    st = report["stages"]
+
+    say("inputs: simulated PMMA bead, paper optics, condenser NA 0.1 (cached after the first run)")
+    case = case or simulated_case("bench-pmma-bead", 0.1, cache)
+    cal = calibrate(case.white, case.optics)
+    frame = case.frame if case.frame.ndim == 2 else case.frame[0]
+    report["case"] = {
+        "condenser_na": case.optics.condenser_na,
+        "medium_index": case.optics.medium_index,
+        "frame_shape": list(frame.shape),
+        **{k: list(v) if isinstance(v, tuple) else v for k, v in cfg.items()},
+    }
+    report["rss_before_mb"] = peak_rss_mb()
+
+    say("fast path (standard case)")
+    rec, res, st["fast"] = fast_path(case, cal, cfg, device)
+    report["case"].update(
+        planes=st["fast"]["planes"], lit_lenslets=st["fast"]["lit_lenslets"], view_shape=list(rec.mask.shape)
+    )
+    say(f"  build {st['fast']['build_s']:.1f} s, frame {st['fast']['frame_s']:.2f} s")
+
+    say("default method 'wotf' (3D Tikhonov, no RL stacks)")
+    _, _, st["wotf"] = fast_path(case, cal, {**cfg, "method": "wotf"}, device, stacks=False)
+
+    if high_na_case is not False and not quick:
+        say("fast path at condenser NA 0.3 (24 lit lenslets)")
+        hcase = high_na_case or simulated_case("bench-pmma-bead", 0.3, cache)
+        hcal = calibrate(hcase.white, hcase.optics)
+        _, _, st["fast_na0.3"] = fast_path(hcase, hcal, cfg, device, repeats=1)
+        del hcase, hcal
+
+    say("time series (streamed from TIFF to OME-Zarr)")
+    n = SERIES_FRAMES[bool(quick)]
+    if series_case is None and not quick:
+        series_case = simulated_case(f"bench-moving{n}", 0.1, cache, frames=n)
+    if series_case is None:
+        st["series"] = series_stage(case, cal, cfg, device, n, rec=rec)
+    else:
+        scal = calibrate(series_case.white, series_case.optics)
+        st["series"] = series_stage(series_case, scal, cfg, device, n)
+
+    if reference:
+        say("reference path, canvas = the box of the spread EIs, all planes")
+        st["reference_eis"] = reference_stage(rec, res, frame, "eis")
+        say(f"  speed-up {st['reference_eis']['speedup']:.1f}x")
+        say(f"reference path, canvas = the whole sensor, dz {SENSOR_DZ[bool(quick)]:g} µm")
+        sub = {**cfg, "dz": SENSOR_DZ[bool(quick)]}
+        rec_sub, res_sub, st["fast_sensor_planes"] = fast_path(case, cal, sub, device)
+        del rec
+        st["reference_sensor"] = reference_stage(rec_sub, res_sub, frame, "sensor", fast_full=st["fast"])
+        say(f"  speed-up {st['reference_sensor']['speedup']:.1f}x at {st['reference_sensor']['planes']} planes")
+    report["machine"]["load_average_end"] = _load()
+    report["targets"] = _targets(report)
+    return report
+
+
+def _targets(report) -> dict:
+    st = report["stages"]
+    peak = max(s.get("peak_rss_mb", 0) for k, s in st.items() if k.startswith("fast")) / 1024
+    out = {"peak_memory_gb": peak, "peak_memory_ok": peak < TARGETS["peak_gb"]}
+    if "reference_sensor" in st:
+        r = st["reference_sensor"]
+        diffs = [
+            st[k][d]
+            for k in ("reference_eis", "reference_sensor")
+            for d in ("max_rel_diff_stacks", "max_rel_diff_delta_n")
+        ]
+        out.update(
+            speedup_sensor=r["speedup"],
+            speedup_sensor_161=r.get("extrapolated_speedup"),
+            speedup_eis=st["reference_eis"]["speedup"],
+            speedup_ok=r["speedup"] >= TARGETS["speedup"],
+            max_rel_diff=max(diffs),
+            max_rel_diff_ok=max(diffs) <= TARGETS["max_rel_diff"],
+        )
+    return out
+
+
+# --------------------------------------------------------------------- output
+def _row(cells):
+    return "| " + " | ".join(str(c) for c in cells) + " |"
+
+
+def _table(head, rows):
+    return "\n".join([_row(head), _row(["---"] * len(head))] + [_row(r) for r in rows])
+
+
+def _f(v, nd=2):
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "–"
+    return f"{v:.{nd}f}"
+
+
+def format_report(report) -> str:
+    m, c, st = report["machine"], report["case"], report["stages"]
+    lines = [
+        f"machine: {m['cpu']}, {m['cores']} cores, {m['memory_gb']} GB; Python {m['python']}, "
+        f"NumPy {m['numpy']}, SciPy {m['scipy']}; device {report['device']}; "
+        f"load average {m['load_average']} -> {m.get('load_average_end')}",
+        f"case: PMMA bead, condenser NA {c['condenser_na']:g}, z {c['z'][0]:g}..{c['z'][1]:g} µm every "
+        f"{c['dz']:g} µm ({c['planes']} planes), {c['iterations']} RL iterations, method {c['method']}, "
+        f"{c['lit_lenslets']} lit lenslets, views {c['view_shape']}" + (" (QUICK)" if report["quick"] else ""),
+        "",
+    ]
+    rows = []
+    for key, label in (
+        ("fast", "fast, NA 0.1 (standard)"),
+        ("wotf", "fast, method wotf, NA 0.1"),
+        ("fast_na0.3", "fast, NA 0.3"),
+        ("fast_sensor_planes", "fast, fewer planes"),
+    ):
+        if key in st:
+            s = st[key]
+            rows.append(
+                [
+                    label,
+                    s["planes"],
+                    s["lit_lenslets"],
+                    _f(s["build_s"], 1),
+                    _f(s["first_frame_s"]),
+                    _f(s["frame_s"]),
+                    _f(s["preprocess_s"]),
+                    _f(s["rl_s"]),
+                    _f(s.get("dpc_s", 0.0)),
+                    _f(s["phase_s"]),
+                    _f(s["peak_rss_mb"] / 1024),
+                ]
+            )
+    lines.append(
+        _table(
+            [
+                "path",
+                "planes",
+                "lenslets",
+                "build s",
+                "1st frame s",
+                "frame s",
+                "views s",
+                "RL s",
+                "DPC s",
+                "phase+RI s",
+                "peak RSS GB",
+            ],
+            rows,
+        )
+    )
+    if "series" in st:
+        s = st["series"]
+        lines += [
+            "",
+            _table(
+                [
+                    "series",
+                    "frames",
+                    "build s",
+                    "frames/s (all)",
+                    "frames/s (steady)",
+                    "read s/frame",
+                    "reconstruct s/frame",
+                    "write s/frame",
+                ],
+                [
+                    [
+                        "serial, OME-Zarr",
+                        s["frames"],
+                        _f(s["build_s"], 1),
+                        _f(s["frames_per_s"], 3),
+                        _f(s["steady_frames_per_s"], 3),
+                        _f(s["read_s"], 3),
+                        _f(s["reconstruct_s"]),
+                        _f(s["write_s"], 3),
+                    ]
+                ],
+            ),
+        ]
+    rows = []
+    for key, label in (("reference_eis", "EI box"), ("reference_sensor", "whole sensor")):
+        if key in st:
+            s = st[key]
+            rows.append(
+                [
+                    label,
+                    "x".join(map(str, s["canvas"])),
+                    _f(s["canvas_vs_view_grid"], 1),
+                    s["planes"],
+                    _f(s["build_s"], 1),
+                    _f(s["frame_s"]),
+                    _f(s["fast_frame_s"]),
+                    _f(s["speedup"], 1) + "x",
+                    f"{s['max_rel_diff_stacks']:.1e}",
+                    f"{s['max_rel_diff_delta_n']:.1e}",
+                ]
+            )
+            if "extrapolated_frame_s" in s:
+                rows.append(
+                    [
+                        label + f", scaled to {s['extrapolated_planes']} planes",
+                        "",
+                        "",
+                        s["extrapolated_planes"],
+                        "",
+                        _f(s["extrapolated_frame_s"], 1),
+                        _f(st["fast"]["frame_s"]),
+                        _f(s["extrapolated_speedup"], 1) + "x",
+                        "",
+                        "",
+                    ]
+                )
+    if rows:
+        lines += [
+            "",
+            _table(
+                [
+                    "reference canvas",
+                    "canvas px",
+                    "canvas / view grid",
+                    "planes",
+                    "PSF build s",
+                    "ref frame s",
+                    "fast frame s",
+                    "speed-up",
+                    "max rel diff stacks",
+                    "max rel diff Δn",
+                ],
+                rows,
+            ),
+        ]
+    t = report["targets"]
+    lines += ["", f"targets: peak memory {t['peak_memory_gb']:.2f} GB (< 4: {t['peak_memory_ok']})"]
+    if "speedup_ok" in t:
+        lines[-1] += (
+            f"; speed-up vs whole-sensor reference {t['speedup_sensor']:.1f}x (>= 10: {t['speedup_ok']}); "
+            f"max rel diff {t['max_rel_diff']:.1e} (<= 1e-3: {t['max_rel_diff_ok']})"
+        )
+    return "\n".join(lines)

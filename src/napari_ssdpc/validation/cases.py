@@ -1,0 +1,192 @@
+"""Validation on simulated phantoms: simulate, calibrate, reconstruct, measure against the truth.
+
+Used by the slow tests and by ``docs/make_validation.py``; also useful to plan an experiment
+(which condenser NA, which z range) before going to the microscope.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+from napari_ssdpc.calibration.calibrate import calibrate
+from napari_ssdpc.physics.lattice import Grid
+from napari_ssdpc.reconstruction.pipeline import Reconstructor
+from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.simulation import phantoms as ph
+from napari_ssdpc.simulation import simulate as sim
+from napari_ssdpc.validation import metrics as an
+
+#: Condenser NA used for validation: σ = 0.75 puts the source edge across the outer lenslet rings,
+#: which gives the largest parallax among phase-contrast views (docs/validation.md).
+VALIDATION_NA = 0.3
+
+
+@dataclass
+class Case:
+    """A simulated acquisition: raw, flat and white frames plus the truth."""
+
+    name: str
+    optics: Optics
+    phantom: object
+    frame: np.ndarray
+    flat: np.ndarray
+    white: np.ndarray
+    grid: Grid
+    seconds: float = 0.0
+    extra: dict = field(default_factory=dict)
+
+
+def simulate_case(
+    name, phantom, optics, *, cache_dir=None, seed=0, axis_offset_px=(3.7, -2.2), rotation_deg=0.4
+) -> Case:
+    """Simulate raw/flat/white frames (cached as .npz in ``cache_dir`` when given)."""
+    first = phantom[0] if isinstance(phantom, list) else phantom
+    if first is not None and first.medium_index is not None:
+        optics = optics.replace(medium_index=float(first.medium_index))
+    grid = Grid.nominal(optics, axis_offset_px=axis_offset_px, rotation_deg=rotation_deg)
+    path = None if cache_dir is None else Path(cache_dir) / f"{name}_na{optics.condenser_na:g}_s{seed}.npz"
+    if path is not None and path.is_file():
+        d = np.load(path)
+        return Case(name, optics, phantom, d["frame"], d["flat"], d["white"], grid, float(d["seconds"]))
+    rng = np.random.default_rng(seed)
+    t0 = time.perf_counter()
+    phs = phantom if isinstance(phantom, list) else [phantom]
+    frames = np.stack([sim.simulate(p, optics, grid=grid, rng=rng).frame for p in phs])
+    seconds = (time.perf_counter() - t0) / len(phs)
+    frame = frames if isinstance(phantom, list) else frames[0]
+    flat = sim.flat_frame(optics, grid=grid, rng=rng)
+    white = sim.white_frame(optics, grid=grid, rng=rng)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(path, frame=frame, flat=flat, white=white, seconds=seconds)
+    return Case(name, optics, phantom, frame, flat, white, grid, seconds)
+
+
+def reconstruct_case(case: Case, *, z=(-80.0, 80.0), dz=1.0, **kw):
+    cal = calibrate(case.white, case.optics)
+    rec = Reconstructor(case.optics, cal, z=z, dz=dz, flat=case.flat, **kw)
+    frame = case.frame if case.frame.ndim == 2 else case.frame[0]
+    return rec.reconstruct(frame), cal, rec
+
+
+def truth_volume(phantom, result, medium_index, blur_um=None):
+    """Δn of the phantom on the reconstruction grid; optionally Gaussian-blurred to the
+    system resolution ``blur_um`` = (FWHM_z, FWHM_xy)."""
+    vol = np.real(phantom.volume(result.z_um, result.y_um, result.x_um, medium_index=medium_index))
+    if blur_um is not None:
+        dz, dy, dx = result.voxel_um
+        s = [blur_um[0] / 2.355 / dz, blur_um[1] / 2.355 / dy, blur_um[1] / 2.355 / dx]
+        vol = ndimage.gaussian_filter(vol, s, mode="constant")
+    return vol.astype(np.float32)
+
+
+def _index(result, point):
+    z, y, x = point
+    return (
+        int(np.argmin(abs(result.z_um - z))),
+        int(np.argmin(abs(result.y_um - y))),
+        int(np.argmin(abs(result.x_um - x))),
+    )
+
+
+def bead_metrics(result, sphere, medium_index) -> dict:
+    """RI at the centre, centroid, lateral/axial FWHM and the z-integrated Δn through the centre."""
+    x, y, z = sphere.center_um
+    sign = 1 if np.real(sphere.n) > medium_index else -1
+    dn = result.delta_n
+    coords = (result.z_um, result.y_um, result.x_um)
+    seed = _index(result, (z, y, x))
+    # the extremum of the right sign nearest the bead: search a box of ±1 diameter laterally
+    cz, cy, cx = an.centroid(dn, coords, sign=sign, seed=_local_extremum(dn, seed, sign, sphere, result))
+    zp = an.line_through(dn, coords, (z, y, x), 0)
+    xp = an.line_through(dn, coords, (z, y, x), 2)
+    yp = an.line_through(dn, coords, (z, y, x), 1)
+    peak_z = float(zp[0][np.argmax(sign * zp[1])])
+    d = float(sphere.diameter_um)
+    opd_true = (np.real(sphere.n) - medium_index) * d
+    return {
+        "dn_true": float(np.real(sphere.n) - medium_index),
+        "dn_centre": float(dn[seed]),
+        "ri_centre": float(medium_index + dn[seed]),
+        "dn_peak": float(zp[1][np.argmax(sign * zp[1])]),
+        "centroid_um": (float(cx), float(cy), float(cz)),
+        "peak_z_um": peak_z,
+        "fwhm_x_um": an.fwhm(*xp),
+        "fwhm_y_um": an.fwhm(*yp),
+        "fwhm_z_um": an.fwhm(*zp),
+        "opd_ratio": float(np.sum(zp[1]) * result.voxel_um[0] / opd_true),
+        "profiles": {"x": xp, "y": yp, "z": zp},
+    }
+
+
+def _local_extremum(dn, seed, sign, sphere, result):
+    r = max(2, int(round(0.5 * sphere.diameter_um / result.voxel_um[2])))
+    iz, iy, ix = seed
+    sub = sign * dn[:, max(iy - r, 0) : iy + r + 1, max(ix - r, 0) : ix + r + 1]
+    k = np.unravel_index(np.argmax(sub), sub.shape)
+    return (int(k[0]), int(k[1] + max(iy - r, 0)), int(k[2] + max(ix - r, 0)))
+
+
+def bar_metrics(result, target) -> dict:
+    """Modulation contrast of each element's vertical bars at the target depth, and the
+    best-focus depth (largest absorption variance over the target).
+
+    The contrast is Michelson's (A_bar − A_gap)/(A_bar + A_gap) on the absorption image as it
+    is displayed, A = max(μ, 0) (deconvolution ringing below zero shows as black), sampled at
+    the bar centres and midway between them: 1 for clean bars, 0 when they merge."""
+    mu = result.absorption
+    iz = int(np.argmin(abs(result.z_um - target.z_um)))
+    parts = target.parts(float("nan"))
+    vertical = [b for b in parts if b.size_um[1] > b.size_um[0]]
+    ys = [b.center_um[1] for b in vertical]
+    x0, x1 = min(b.center_um[0] for b in vertical) - 5, max(b.center_um[0] for b in vertical) + 5
+    y0, y1 = min(ys) - 12, max(ys) + 12
+    box = (slice(None), slice(*np.searchsorted(result.y_um, [y0, y1])), slice(*np.searchsorted(result.x_um, [x0, x1])))
+    energy = np.var(mu[box], axis=(1, 2))
+    contrast = {}
+    for k, p in enumerate(target.period_um):
+        bars = vertical[3 * k : 3 * k + 3]
+        xs = sorted(b.center_um[0] for b in bars)
+        yv = bars[0].center_um[1]
+        iy = int(np.argmin(abs(result.y_um - yv)))
+        band = mu[iz, iy - 2 : iy + 3].mean(axis=0)
+        a_bar = max(float(np.mean([np.interp(x, result.x_um, band) for x in xs])), 0.0)
+        a_gap = max(float(np.mean([np.interp(0.5 * (a + b), result.x_um, band) for a, b in zip(xs[:-1], xs[1:])])), 0.0)
+        contrast[float(p)] = (a_bar - a_gap) / (a_bar + a_gap) if a_bar + a_gap > 0 else float("nan")
+    return {"contrast": contrast, "best_focus_z_um": float(result.z_um[int(np.argmax(energy))]), "focus_energy": energy}
+
+
+def cell_metrics(result, cell, resolution_um) -> dict:
+    """Correlation with the truth blurred to the system resolution; RI inside the nucleus."""
+    n_med = float(cell.medium_index)
+    truth = truth_volume(cell, result, n_med)
+    blurred = truth_volume(cell, result, n_med, blur_um=resolution_um)
+    parts = cell.parts(n_med)
+    nucleus = np.abs(np.real(parts[1].delta_n(*np.meshgrid(result.z_um, result.y_um, result.x_um, indexing="ij")))) > 0
+    fov = np.hypot(*np.meshgrid(result.y_um, result.x_um, indexing="ij")) < 50
+    mask = np.broadcast_to(fov, truth.shape)
+    ri_nuc = float(n_med + result.delta_n[nucleus].mean())
+    return {
+        "correlation_blurred": an.correlation(result.delta_n, blurred, mask),
+        "correlation_truth": an.correlation(result.delta_n, truth, mask),
+        "ri_nucleus": ri_nuc,
+        "ri_nucleus_true": float(np.real(cell.n_nucleus)),
+        "ri_nucleus_blurred_truth": float(n_med + blurred[nucleus].mean()),
+    }
+
+
+def paper_optics(condenser_na=VALIDATION_NA) -> Optics:
+    return Optics.paper().replace(condenser_na=condenser_na)
+
+
+CASES = {
+    "bead": ph.pmma_bead,
+    "two-beads": ph.two_beads,
+    "cell": ph.cell,
+    "bars": ph.bar_target,
+}

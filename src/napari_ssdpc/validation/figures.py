@@ -1,0 +1,60 @@
+"""Summary figures (matplotlib, Agg): slices through a reconstruction and profiles against the truth."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def bead_figure(result, sphere, medium_index, path, title=""):
+    """xy, xz and yz slices of the RI through the bead centre, plus lateral and axial RI profiles
+    against the ground truth."""
+    from napari_ssdpc.validation.cases import truth_volume
+
+    plt = _plt()
+    ri = result.ri
+    truth = medium_index + truth_volume(sphere, result, medium_index)
+    x, y, z = sphere.center_um
+    iz, iy, ix = (int(np.argmin(abs(c - v))) for c, v in ((result.z_um, z), (result.y_um, y), (result.x_um, x)))
+    lim = max(float(np.abs(ri - medium_index).max()), 1e-6)
+    kw = dict(cmap="RdBu_r", vmin=medium_index - lim, vmax=medium_index + lim)
+    fig, ax = plt.subplots(1, 5, figsize=(19, 3.9), constrained_layout=True)
+    ax[0].imshow(ri[iz], extent=(result.x_um[0], result.x_um[-1], result.y_um[-1], result.y_um[0]), **kw)
+    ax[1].imshow(
+        ri[:, iy, :], extent=(result.x_um[0], result.x_um[-1], result.z_um[-1], result.z_um[0]), aspect="auto", **kw
+    )
+    im = ax[2].imshow(
+        ri[:, :, ix], extent=(result.y_um[0], result.y_um[-1], result.z_um[-1], result.z_um[0]), aspect="auto", **kw
+    )
+    fig.colorbar(im, ax=ax[2], label="refractive index")
+    for a, t, lab in zip(
+        ax[:3],
+        (f"xy at z = {result.z_um[iz]:g} µm", "xz", "yz"),
+        (("x (µm)", "y (µm)"), ("x (µm)", "z (µm)"), ("y (µm)", "z (µm)")),
+    ):
+        a.set_title(t)
+        a.set_xlabel(lab[0])
+        a.set_ylabel(lab[1])
+    ax[3].plot(result.x_um, ri[iz, iy], label="reconstruction")
+    ax[3].plot(result.x_um, truth[iz, iy], "k--", label="truth")
+    ax[3].set_xlabel("x (µm)")
+    ax[3].set_ylabel("refractive index")
+    ax[3].set_title("lateral profile")
+    ax[3].legend(fontsize=8)
+    ax[4].plot(result.z_um, ri[:, iy, ix], label="reconstruction")
+    ax[4].plot(result.z_um, truth[:, iy, ix], "k--", label="truth")
+    ax[4].set_xlabel("z (µm)")
+    ax[4].set_title("axial profile")
+    if title:
+        fig.suptitle(title)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path

@@ -1,0 +1,241 @@
+"""The reference path: Richardson–Lucy the straightforward way, as light-field toolboxes do it.
+
+For each lenslet half and each plane z it builds a full-frame PSF: a sensor-sized image that
+holds the kernel of every lenslet of the half at that lenslet's elemental image (EI). One RL
+iteration then convolves every object plane with its PSF by FFTs over the whole sensor and sums
+over z (forward), and correlates the ratio image with every PSF over the whole sensor (adjoint).
+
+It uses the fast path's kernels (``LensletPSF`` of the same ``Reconstructor``), object grid,
+masks, start value and update, so the two paths compute the same thing and their outputs can
+be compared; only the data structures differ: sensor-sized PSFs per half and plane and
+sensor-sized FFTs here, per-lenslet kernels on the view grid and band-limited spectra in
+``deconvolution.MultiViewRL``.
+
+Layout. The fast path treats each view on its own (no light of one lenslet in another EI,
+``core/psf.py``). To compute that same model on a sensor, the EIs are laid out on the lenslet
+lattice with a pitch of one convolution window (P, Q) px instead of the physical 145 px, so that
+the blur and parallax margins of neighbouring EIs never overlap. ``canvas='sensor'`` keeps the
+camera's frame size (as large as the toolboxes' FFTs; larger only when the spread lattice does
+not fit), ``canvas='eis'`` only the box that holds the spread EIs (the cheapest honest
+reference; docs/performance.md reports both).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.fft as sfft
+
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.reconstruction.deconvolution import RLResult
+from napari_ssdpc.reconstruction.dpc import phase_to_delta_n
+
+CANVASES = ("sensor", "eis")
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where the spread EIs lie on the canvas.
+
+    The object grid (P, Q) of the fast path is circular; here it is linear, with object row i
+    at position i (i < split) or i − P (i ≥ split), and placed on the canvas at rows [0, P)
+    (position p at canvas row p + offset). Lenslet k's kernel sits at ``origins[k]``, so its
+    view pixel j lies on canvas row ``origins[k] + offset + j``.
+    """
+
+    shape: tuple  # canvas (rows, cols)
+    fft_shape: tuple  # (P, Q): the fast path's padded view grid
+    view_shape: tuple  # (ny, nx)
+    reach: tuple  # kernel half-width kept (R_y, R_x): (P − ny)//2, (Q − nx)//2
+    origins: np.ndarray  # (K, 2) kernel centre of each lenslet (row, col) on the canvas
+
+    @property
+    def split(self) -> tuple:
+        return tuple(n + (p - n) // 2 for n, p in zip(self.view_shape, self.fft_shape))
+
+    @property
+    def offset(self) -> tuple:
+        return tuple(p - s for p, s in zip(self.fft_shape, self.split))
+
+    @property
+    def area_ratio(self) -> float:
+        """Canvas pixels per view-grid pixel of the fast path."""
+        return self.shape[0] * self.shape[1] / (self.fft_shape[0] * self.fft_shape[1])
+
+    def to_linear(self, obj):
+        """Circular object grid (..., P, Q) -> linear (rolled so that position p sits at p + offset)."""
+        return np.roll(obj, self.offset, axis=(-2, -1))
+
+    def to_circular(self, obj):
+        return np.roll(obj, tuple(-o for o in self.offset), axis=(-2, -1))
+
+    def windows(self, k):
+        """Canvas slices (rows, cols) of lenslet k's view."""
+        (r, c), (oy, ox), (ny, nx) = self.origins[k], self.offset, self.view_shape
+        return slice(r + oy, r + oy + ny), slice(c + ox, c + ox + nx)
+
+
+def layout(rec, canvas: str = "sensor") -> Layout:
+    """The spread-EI layout of a fast-path ``Reconstructor`` (with Richardson–Lucy operators)."""
+    if canvas not in CANVASES:
+        raise SsdpcError(f"unknown canvas '{canvas}'; use one of {', '.join(CANVASES)}")
+    if not hasattr(rec, "rl"):
+        raise SsdpcError(
+            "the reference path needs the Richardson-Lucy operators; build the Reconstructor "
+            "with stacks=True or method='rl'"
+        )
+    p, q = rec.fft_shape
+    ny, nx = rec.mask.shape
+    reach = ((p - ny) // 2, (q - nx) // 2)
+    cells = np.array([(ln.row, ln.col) for ln in rec.lenslets])
+    cells -= cells.min(axis=0)
+    origins = cells * np.array([p, q]) + np.array(reach)
+    need = tuple(int(n * s + 2 * r) for n, s, r in zip(cells.max(axis=0) + 1, (p, q), reach))
+    if canvas == "sensor":
+        shape = tuple(max(int(a), b) for a, b in zip(rec.calibration.frame_shape, need))
+    else:
+        shape = tuple(sfft.next_fast_len(n, real=True) for n in need)
+    return Layout(shape, (p, q), (ny, nx), reach, origins)
+
+
+def _kernels(rec, z, lay: Layout):
+    """Lenslet kernels of plane z (K, 2R_y+1, 2R_x+1), centre in the middle: the fast path's
+    OTFs (full spectrum) back in real space, cropped to the reach."""
+    full = sfft.irfft2(rec.psf.otf(float(z), rec.fft_shape), s=rec.fft_shape, workers=-1)
+    ry, rx = lay.reach
+    full = np.roll(full, (ry, rx), axis=(-2, -1))
+    return full[:, : 2 * ry + 1, : 2 * rx + 1]
+
+
+def full_frame_psf(kernels, members, lay: Layout) -> np.ndarray:
+    """The sensor image of an on-axis point through the lenslets ``members``: each kernel
+    centred on its lenslet's origin (canvas-sized, float32)."""
+    img = np.zeros(lay.shape, np.float32)
+    ry, rx = lay.reach
+    for k in members:
+        r, c = lay.origins[k]
+        img[r - ry : r + ry + 1, c - rx : c + rx + 1] += kernels[k]
+    return img
+
+
+class ReferenceRL:
+    """One half's Richardson–Lucy with full-frame PSFs and whole-sensor FFT convolutions."""
+
+    def __init__(self, rec, half: str, lay: Layout, kernels=None, progress=None):
+        self.lay = lay
+        self.members = list(rec.halves[half])
+        self.z = len(rec.z_um)
+        self.view_mask = np.asarray(rec.view_mask, np.float32)
+        t0 = time.perf_counter()
+        self.otf = np.empty((self.z, lay.shape[0], lay.shape[1] // 2 + 1), np.complex64)
+        for i, z in enumerate(rec.z_um):
+            ker = _kernels(rec, z, lay) if kernels is None else kernels[i]
+            self.otf[i] = sfft.rfft2(full_frame_psf(ker, self.members, lay), workers=-1)
+            if progress is not None:
+                progress(i + 1, self.z)
+        self.mask = self.place(self.view_mask[self.members])
+        norm = self.adjoint(self.mask)
+        top = float(norm.max())
+        self.support = (norm > 1e-3 * top).astype(np.float32)
+        self.norm = np.maximum(norm, 1e-3 * top)
+        self.build_seconds = time.perf_counter() - t0
+
+    def place(self, views):
+        """Views of the half's lenslets (K_h, ny, nx) -> a canvas image."""
+        img = np.zeros(self.lay.shape, np.float32)
+        for v, k in zip(views, self.members):
+            img[self.lay.windows(k)] = v
+        return img
+
+    def read(self, img):
+        return np.stack([img[self.lay.windows(k)] for k in self.members])
+
+    def forward(self, obj):
+        """Σ_z PSF_z ⊛ o_z over the whole canvas, one plane at a time: (Z, P, Q) linear -> canvas."""
+        acc = np.zeros_like(self.otf[0])
+        for i in range(self.z):
+            spec = sfft.rfft2(obj[i], s=self.lay.shape, workers=-1)
+            spec *= self.otf[i]
+            acc += spec
+        return sfft.irfft2(acc, s=self.lay.shape, workers=-1)
+
+    def adjoint(self, img):
+        """PSF_z ⋆ img over the whole canvas for every plane: canvas -> (Z, P, Q) linear."""
+        spec = sfft.rfft2(img, workers=-1)
+        p, q = self.lay.fft_shape
+        out = np.empty((self.z, p, q), np.float32)
+        for i in range(self.z):
+            prod = np.conj(self.otf[i])
+            prod *= spec
+            out[i] = sfft.irfft2(prod, s=self.lay.shape, workers=-1)[:p, :q]
+        return out
+
+    def run(self, views, iterations: int) -> RLResult:
+        """Same start value and update as ``MultiViewRL.run``; returns the (Z, ny, nx) stack."""
+        y = self.place(np.asarray(views, np.float32)) * self.mask
+        mean = float(np.sum(y) / max(np.sum(self.mask), 1))
+        obj = np.full((self.z,) + self.lay.fft_shape, mean / max(self.z, 1), np.float32) * self.support
+        eps = np.float32(1e-6 * max(float(y.max()), 1e-12))
+        history = []
+        for _ in range(iterations):
+            est = self.forward(obj)
+            ratio = np.where(self.mask > 0, y / np.maximum(est, eps), 0).astype(np.float32)
+            new = (obj * np.maximum(self.adjoint(ratio), 0) / self.norm).astype(np.float32)
+            history.append(float(np.linalg.norm(new - obj) / max(np.linalg.norm(obj), 1e-30)))
+            obj = new
+        (oy, ox), (ny, nx) = self.lay.offset, self.lay.view_shape
+        return RLResult(obj[:, oy : oy + ny, ox : ox + nx], history)
+
+
+@dataclass
+class ReferenceResult:
+    stacks: dict
+    delta_n: np.ndarray
+    phase: np.ndarray
+    layout: Layout
+    timings: dict
+
+
+def reconstruct_reference(rec, frame, canvas: str = "sensor", progress=None) -> ReferenceResult:
+    """Reconstruct ``frame`` with the reference RL and the pipeline's own DPC and phase steps.
+
+    Halves are built and run one after the other, so that only one half's full-frame PSFs
+    (Z sensor-sized spectra) are held at a time. ``timings``: build_s (PSFs), preprocess_s, rl_s,
+    dpc_s, phase_s."""
+    lay = layout(rec, canvas)
+    t0 = time.perf_counter()
+    views = rec.preprocess(frame)
+    pre = time.perf_counter() - t0
+    stacks, build, run = {}, 0.0, 0.0
+    for j, h in enumerate(rec.halves):
+        op = ReferenceRL(
+            rec,
+            h,
+            lay,
+            progress=None if progress is None else (lambda i, n, j=j: progress(j * n + i, 4 * n, "reference PSF")),
+        )
+        build += op.build_seconds
+        t0 = time.perf_counter()
+        stacks[h] = op.run(views[op.members], rec.iterations).stack
+        run += time.perf_counter() - t0
+        del op
+    t0 = time.perf_counter()
+    dpc, _ = rec.dpc_from_stacks(stacks)
+    t1 = time.perf_counter()
+    phase = rec.phase_from(views, dpc)
+    dn = phase_to_delta_n(phase, rec.optics.wavelength_um, rec.dz)
+    return ReferenceResult(
+        stacks,
+        dn,
+        phase,
+        lay,
+        {"build_s": build, "preprocess_s": pre, "rl_s": run, "dpc_s": t1 - t0, "phase_s": time.perf_counter() - t1},
+    )
+
+
+def max_relative_difference(a, b) -> float:
+    """max |a − b| / max |b| (b the reference)."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-30))
