@@ -30,7 +30,7 @@ LABELS = {
 def source_over_lenslets(optics: Optics, condenser_nas=(0.1, 0.25)):
     """The MLA as seen on the sensor (y down), in NA units: a/(f_obj m_r) = −λ u_k. The objective
     pupil (black), the condenser disk (gold, symmetric so its inversion does not show) and each
-    lenslet's sub-aperture, coloured by its case (DESIGN.md §4.2)."""
+    lenslet's sub-aperture, coloured by its case (docs/conventions.md)."""
     fig, axes = plt.subplots(1, len(condenser_nas), figsize=(5.2 * len(condenser_nas), 5.8))
     lam = optics.wavelength_um
     for ax, na_c in zip(np.atleast_1d(axes), condenser_nas):

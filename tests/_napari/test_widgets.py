@@ -11,6 +11,8 @@ import time
 import numpy as np
 import pytest
 
+from napari_ssdpc.physics.design import design
+
 pytest.importorskip("napari")
 pytest.importorskip("pytestqt")
 
@@ -223,7 +225,7 @@ def test_optics_widget_design_numbers_are_live(make_napari_viewer, tmp_path):
     assert "FOV 122.5 µm" in ow.design.value and "R_xy 3.90 µm" in ow.design.value
     assert "32 in the pupil" in ow.design.value
     ow.fields["fourier_lens_mm"].value = 150.0  # twice the Fourier lens: M_EI halves, FOV doubles
-    d = _widgets.session_for(viewer).optics.design()
+    d = design(_widgets.session_for(viewer).optics)
     assert _widgets.session_for(viewer).optics.fourier_lens_mm == 150.0
     assert d["fov_um"] == pytest.approx(2 * 122.55, rel=1e-3) and f"FOV {d['fov_um']:.1f} µm" in ow.design.value
     p = tmp_path / "optics.yaml"

@@ -130,7 +130,7 @@ def _with_condenser(optics, na_c):
 
 
 def test_dpc_phase_collapses_as_sigma_goes_to_one(optics):
-    """Full source, split detection pupil: the in-focus DPC phase TF vanishes as σ → 1 (DESIGN §4.2)."""
+    """Full source, split detection pupil: the in-focus DPC phase TF vanishes as σ → 1 (docs/conventions.md)."""
     contrast = {}
     for na_c in (0.1, 0.36, 0.38, 0.39, 0.399):
         d = dpc_transfer_functions(_with_condenser(optics, na_c), shape=(97, 97), warn=False)

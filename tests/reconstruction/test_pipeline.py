@@ -131,7 +131,10 @@ def test_cli_reconstruct_writes_ome_tiff_and_keeps_outputs_on_error(case, calibr
     assert (tmp_path / "out_phase.ome.tif").is_file()
     before = out.read_bytes()
     capsys.readouterr()
-    for bad, words in ((["--dz", "0"], "dz must be > 0"), (["--iterations", "0"], "iterations must be >= 1")):
+    for bad, words in (
+        (["--dz", "0"], "'dz_um' must be positive"),
+        (["--iterations", "0"], "rl_iterations' must be positive"),
+    ):
         assert main(args + bad + ["-o", str(out)]) == 2
         err = capsys.readouterr().err
         assert words in err and err.count("\n") == 1

@@ -8,6 +8,7 @@ import pytest
 import yaml
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
+from napari_ssdpc.physics.design import design
 from napari_ssdpc.settings.optics import PAPER_OPTICS, Optics, circle_overlap_fraction
 
 
@@ -34,7 +35,7 @@ def test_shared_yaml_matches_builtin(paper, shared_optics_path):
 )
 def test_design_reproduces_paper_within_half_percent(paper, key, expected):
     tol = 0.005 if key not in ("r_z_ffl_um", "r_z_printed_um") else 0.01  # the paper prints R_z to 2-3 digits
-    assert paper.design()[key] == pytest.approx(expected, rel=tol)
+    assert design(paper)[key] == pytest.approx(expected, rel=tol)
 
 
 def test_derived_quantities(paper):
@@ -90,10 +91,15 @@ def _with(path, mutate):
         (lambda d: d["mla"].update(pitch_mm=d["mla"].pop("pitch_um") / 1000), "rename the key"),
         (lambda d: d.update(wavelength_um=520), "check the unit"),
         (lambda d: d["sensor"].update(pixel_um=-3.45), "must be positive"),
-        (lambda d: d["mla"].update(grid="hex"), "unknown MLA grid 'hex'"),
+        (lambda d: d["mla"].update(grid="triangle"), "'mla.grid' must be 'square' or 'hex'"),
         (lambda d: d.update(condenser_na=0.4), "no phase contrast with a split detection pupil"),
         (lambda d: d.update(colour="red"), "unknown key 'colour'"),
-        (lambda d: d.update(reconstruction={"dz_um": 0}), "dz_um must be > 0"),
+        (lambda d: d.update(reconstruction={"dz_um": 0}), "'dz_um' must be positive"),
+        (lambda d: d.update(flip_x="false"), "'flip_x' must be true or false, got 'false' (write it without quotes)"),
+        (lambda d: d["sensor"].update(width_px=2448.9), "'sensor.width_px' must be a whole number"),
+        (lambda d: d["objective"].update(magnificaton=20), "did you mean 'magnification'"),
+        (lambda d: d.update(wavelength_um="0.52"), "write it without quotes"),
+        (lambda d: d.update(medium_index=float("nan")), "finite"),
     ],
 )
 def test_bad_yaml_gives_one_line_error(tmp_path, mutate, words):
@@ -127,9 +133,68 @@ def test_yaml_round_trip(tmp_path, paper):
 
 def test_illumination_regimes_follow_condenser_na(paper):
     # sigma 0.25: the four central lenslets straddle the source edge, the rest see dark field
-    d = paper.design()
-    assert (d["lenslets_brightfield"], d["lenslets_straddling"], d["lenslets_darkfield"]) == (0, 4, 28)
+    d = design(paper)
+    assert (d["lenslets_inside"], d["lenslets_straddling"], d["lenslets_outside"]) == (0, 4, 28)
     # 0.3 NA covers the rings at 0.094 and 0.211 NA (+0.067 sub-aperture radius) wholly,
     # cuts the rings at 0.283 and 0.340 NA and misses the outer ring at 0.389 NA
-    d = paper.replace(condenser_na=0.3).design()
-    assert (d["lenslets_brightfield"], d["lenslets_straddling"], d["lenslets_darkfield"]) == (12, 12, 8)
+    d = design(paper.replace(condenser_na=0.3))
+    assert (d["lenslets_inside"], d["lenslets_straddling"], d["lenslets_outside"]) == (12, 12, 8)
+
+
+def test_duplicated_key_nesting_and_encoding_are_one_line_errors(tmp_path):
+    text = tmp_path / "dup.yaml"
+    text.write_text(yaml.safe_dump(PAPER_OPTICS) + "condenser_na: 0.3\n")
+    for path, words in [
+        (text, "key 'condenser_na' is given twice"),
+        (_write(tmp_path / "deep.json", "[" * 100000 + "]" * 100000), "nested too deeply"),
+        (_write(tmp_path / "latin.yaml", b"name: caf\xe9\n"), "not a text file in UTF-8"),
+        (_write(tmp_path / "list.yaml", "- 1\n- 2\n"), "expected a mapping"),
+    ]:
+        with pytest.raises(SsdpcError) as e:
+            Optics.from_yaml(path)
+        assert words in str(e.value) and "\n" not in str(e.value)
+
+
+def _write(path, content):
+    (path.write_bytes if isinstance(content, bytes) else path.write_text)(content)
+    return path
+
+
+def test_optics_is_hashable_and_copies_are_independent(paper):
+    other = paper.replace(condenser_na=0.3)
+    assert hash(paper) != hash(other) and paper.condenser_na == 0.1 and other.condenser_na == 0.3
+    assert hash(paper) == hash(Optics.paper())
+    assert other.replace(na=0.5).objective.na == 0.5 and other.na == 0.4
+
+
+def test_run_config_round_trip_and_optics_file_with_reconstruction(tmp_path, paper):
+    from napari_ssdpc.settings import ReconstructionSettings, RunConfig
+
+    cfg = RunConfig(optics=paper.replace(medium_index=1.33), reconstruction=ReconstructionSettings(dz_um=0.5))
+    cfg.to_yaml(tmp_path / "run.yaml")
+    assert RunConfig.from_yaml(tmp_path / "run.yaml") == cfg
+    d = paper.to_dict() | {"reconstruction": {"z_min_um": -40.0, "z_max_um": 40.0}}
+    (tmp_path / "o.yaml").write_text(yaml.safe_dump(d))
+    assert RunConfig.from_yaml(tmp_path / "o.yaml").reconstruction.z_min_um == -40.0
+    assert Optics.from_yaml(tmp_path / "o.yaml") == paper
+    assert Optics.from_yaml(tmp_path / "run.yaml") == cfg.optics
+
+
+@pytest.mark.parametrize(
+    "changes, words",
+    [
+        ({"z_min_um": -1e6, "z_max_um": 1e6}, "outside -5000 to 5000"),
+        ({"dz_um": 0.001}, "outside 0.05 to 100"),
+        ({"z_min_um": -1000.0, "z_max_um": 1000.0, "dz_um": 0.5}, "4001 planes"),
+        ({"z_min_um": 10.0, "z_max_um": -10.0}, "z range is empty"),
+        ({"tikhonov_alpha": float("inf")}, "finite"),
+        ({"rl_iterations": None}, "must be a whole number"),
+        ({"method": "magic"}, "must be 'wotf' or 'rl'"),
+    ],
+)
+def test_reconstruction_settings_refuse_impossible_values(changes, words):
+    from napari_ssdpc.settings import ReconstructionSettings
+
+    with pytest.raises(SsdpcError) as e:
+        ReconstructionSettings.from_dict(changes, source="run.yaml")
+    assert words in str(e.value) and "\n" not in str(e.value)

@@ -1,6 +1,6 @@
 """Benchmark machinery: the reference path computes what the fast path computes; the report.
 
-No test here times anything (benchmarks print ratios, DESIGN.md §6)."""
+No test here times anything (benchmarks print ratios)."""
 
 import json
 

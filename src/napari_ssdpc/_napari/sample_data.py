@@ -58,7 +58,7 @@ def _cached(name: str, make, key: str = "") -> np.ndarray:
 
 def _physics(optics) -> dict:
     """The optics as they enter the simulation (reconstruction settings and name left out)."""
-    return {k: v for k, v in optics.to_dict().items() if k not in ("reconstruction", "name")}
+    return {k: v for k, v in optics.to_dict().items() if k != "name"}
 
 
 def _optics_meta(optics, name: str) -> dict:

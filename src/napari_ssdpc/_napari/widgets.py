@@ -4,7 +4,7 @@
 The widgets are thin: they collect settings, call ``core`` and turn the results into layers.
 The four widgets of one viewer share a ``Session`` (the optics, the built operators).
 
-Threading (DESIGN.md §6): every long step runs in a generator ``thread_worker``. The core
+Threading: every long step runs in a generator ``thread_worker``. The core
 function runs in a helper thread and reports ``progress(done, total, label)``; the generator
 relays each report with ``yield``, so napari's progress bar and the widget's status follow it.
 Cancel sets a stop flag that the core checks every iteration (``should_stop``) and that the
@@ -32,7 +32,9 @@ from psygnal import Signal
 
 from napari_ssdpc._napari.reader import calibration_layers, result_layer
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
-from napari_ssdpc.settings.optics import PHASE_METHODS, TRANSFER_MODELS, Optics
+from napari_ssdpc.physics.design import design
+from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.settings.reconstruction import PHASE_METHODS, TRANSFER_MODELS, ReconstructionSettings
 
 
 # =============================================================================== session
@@ -58,7 +60,7 @@ class Session:
     def spec(self) -> dict:
         """Everything a Reconstructor is built from: the Operators widget's z range, dz, model,
         method and calibration, and the Reconstruct widget's flat frame and α."""
-        rec = self.optics.reconstruction
+        rec = ReconstructionSettings().to_dict()
         spec = {
             "optics": self.optics,
             "calibration": None,
@@ -428,7 +430,7 @@ OPTICS_FIELDS = [
 
 def design_text(optics: Optics) -> str:
     """The design numbers (paper Eqs. 8-14), a few short lines."""
-    d = optics.design()
+    d = design(optics)
     return "\n".join(
         [
             f"FOV {d['fov_um']:.1f} µm · R_xy {d['r_xy_um']:.2f} µm",
@@ -437,8 +439,8 @@ def design_text(optics: Optics) -> str:
             f"DOF {d['dof_full_um']:.1f} µm full width (FWHM {d['dof_fwhm_um']:.1f} µm)",
             f"usable depth {d['dof_um']:.1f} µm",
             f"lenslets: {d['lenslets_in_pupil']} in the pupil, {d['lenslets_usable']} usable (≥ 50 % inside)",
-            f"source disk: {d['lenslets_brightfield']} inside, {d['lenslets_straddling']} straddling, "
-            f"{d['lenslets_darkfield']} outside",
+            f"source disk: {d['lenslets_inside']} inside, {d['lenslets_straddling']} straddling, "
+            f"{d['lenslets_outside']} outside",
             f"σ {d['sigma']:.2f} · M_EI {d['m_ei']:.3f} · object pixel {d['object_pixel_um']:.4f} µm",
             f"pitch {d['pitch_px']:.2f} px · EI radius {d['ei_radius_px']:.2f} px",
         ]
@@ -464,7 +466,7 @@ class OpticsWidget(Container):
         self.name = LineEdit(label="name", tooltip="a name for this instrument (free text)")
         self.path = FileEdit(mode="r", filter="*.yaml *.yml")
         self.path.label = "optics YAML"
-        self.path.tooltip = "optics file in the schema of shared/paper-optics.yaml (lengths carry their unit)"
+        self.path.tooltip = "optics file in the schema of docs/paper-optics.yaml (lengths carry their unit)"
         self.load_button = PushButton(text="Load YAML", tooltip="read the optics from the YAML file above")
         self.save_button = PushButton(text="Save YAML…", tooltip="write the optics to a YAML file")
         self.paper_button = PushButton(text="Paper optics", tooltip="the paper's instrument (20×/0.4, f_fl 75 mm)")
@@ -664,7 +666,7 @@ class OperatorsWidget(Container):
         self.viewer = napari_viewer
         self.session = session_for(napari_viewer)
         self.session.operators_widget = weakref.ref(self)
-        rec = self.session.optics.reconstruction
+        rec = ReconstructionSettings().to_dict()
         self.calibration = ComboBox(
             label="calibration",
             choices=_calibration_layers(napari_viewer),
@@ -749,7 +751,7 @@ class OperatorsWidget(Container):
         _follow_layers(napari_viewer, self)
 
     def _defaults(self, optics):
-        rec = optics.reconstruction
+        rec = ReconstructionSettings().to_dict()
         self.z_min.value, self.z_max.value, self.dz.value = rec["z_min_um"], rec["z_max_um"], rec["dz_um"]
         self.model.value, self.method.value = rec["model"], rec["method"]
 
@@ -856,7 +858,7 @@ class ReconstructWidget(Container):
         self.viewer = napari_viewer
         self.session = session_for(napari_viewer)
         self.session.reconstruct_widget = weakref.ref(self)
-        rec = self.session.optics.reconstruction
+        rec = ReconstructionSettings().to_dict()
         self.raw = ComboBox(
             label="raw frame(s)",
             choices=_image_layers(napari_viewer),
@@ -917,7 +919,7 @@ class ReconstructWidget(Container):
         _follow_layers(napari_viewer, self)
 
     def _defaults(self, optics):
-        rec = optics.reconstruction
+        rec = ReconstructionSettings().to_dict()
         self.iterations.value = int(rec["rl_iterations"])
         self.alpha.value = float(rec["tikhonov_alpha"] or 0.0)
 
@@ -965,8 +967,8 @@ class ReconstructWidget(Container):
                 prefix = f"frame {ti} ({i + 1}/{len(indices)}): " if series else ""
                 res = rec.reconstruct(
                     frame,
-                    progress=lambda d, n, lab: progress(d, n, prefix + lab),
-                    should_stop=should_stop,  # noqa: B023
+                    progress=lambda d, n, lab: progress(d, n, prefix + lab),  # noqa: B023
+                    should_stop=should_stop,
                 )
                 arrays = result_arrays(res)
                 for q in wanted:

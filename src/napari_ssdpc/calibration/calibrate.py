@@ -41,7 +41,7 @@ from scipy import ndimage, optimize, signal
 from scipy.special import erfc
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
-from napari_ssdpc.io.frames import atomic_write
+from napari_ssdpc.files import atomic_write
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.settings.optics import Lenslet, Optics, circle_overlap_fraction
 

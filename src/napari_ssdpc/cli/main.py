@@ -15,7 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from napari_ssdpc import __version__
+from napari_ssdpc.cli.options import add_reconstruction_options, run_config
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
+from napari_ssdpc.reconstruction import outputs
 
 PHANTOMS = ("bead", "two-beads", "cell", "bars", "moving")
 
@@ -35,11 +37,11 @@ def _check_output(path):
 
 # ----------------------------------------------------------------------- commands
 def cmd_design(args):
-    from napari_ssdpc.settings.optics import design_table
+    from napari_ssdpc.physics.design import design, design_table
 
     optics = _optics(args.optics)
     if args.json:
-        print(json.dumps(optics.design(), indent=2))
+        print(json.dumps(design(optics), indent=2))
     else:
         print(design_table(optics))
 
@@ -109,20 +111,12 @@ def cmd_simulate(args):
         print(f"wrote white frame {args.white}")
 
 
-SAVE_CHOICES = ("phase", "dpc", "stacks", "absorption", "delta_n")
-
-
-def _result_images(result, save):
-    """{name: (array, axes, description)} of the requested outputs of one frame."""
-    from napari_ssdpc.io.series import result_images
-
-    return result_images(result, save)
-
-
 def _output_paths(out: Path, names):
     """OME-TIFF: RI in OUT.ome.tif, the others beside it as OUT_<name>.ome.tif."""
     stem = out.name[: -len(".ome.tif")] if out.name.endswith(".ome.tif") else out.stem
-    return {n: out if n == "ri" else out.with_name(f"{stem}_{n}.ome.tif") for n in names}
+    return {
+        n: out if n == "ri" else out.with_name(f"{stem}{outputs.QUANTITIES[n].file_suffix()}.ome.tif") for n in names
+    }
 
 
 def cmd_reconstruct(args):
@@ -135,15 +129,19 @@ def cmd_reconstruct(args):
     is_zarr = out.suffix == ".zarr"
     if not (is_zarr or out.name.endswith((".tif", ".tiff"))):
         raise SsdpcError(f"output {out.name}: give a .ome.tif (one frame) or a .zarr (time series) path")
-    save = [s.strip() for s in (args.save or "").split(",") if s.strip()]
-    bad = [s for s in save if s not in SAVE_CHOICES]
-    if bad:
-        raise SsdpcError(f"--save {','.join(bad)}: unknown output; choose from {','.join(SAVE_CHOICES)}")
+    save = outputs.parse_save(args.save)
     distributed = args.workers is not None or args.scheduler is not None
     if distributed and not is_zarr:
         raise SsdpcError("--workers/--scheduler spread the frames of a time series; write it to OME-Zarr (-o OUT.zarr)")
     cal = Calibration.from_json(args.calibration)
-    optics = cal.optics if args.optics is None else _optics(args.optics)
+    if args.optics is not None:
+        optics = _optics(args.optics)
+    elif args.config is None:
+        optics = cal.optics
+    else:
+        optics = None  # the configuration's
+    cfg = run_config(args, optics)
+    optics = cfg.optics
     source = FrameSource(args.raw) if is_zarr else None  # a series streams, frame by frame
     frames = None if is_zarr else read_frame(args.raw)
     if frames is not None and frames.ndim == 3 and len(frames) > 1:
@@ -152,16 +150,7 @@ def cmd_reconstruct(args):
     recipe = Recipe(
         optics,
         cal,
-        dict(
-            z=args.z,
-            dz=args.dz,
-            iterations=args.iterations,
-            alpha=args.alpha,
-            model=args.model,
-            method=args.method,
-            device=args.device,
-            stacks=bool({"dpc", "stacks", "absorption"} & set(save)),
-        ),
+        dict(settings=cfg.reconstruction, stacks=any(outputs.QUANTITIES[s].needs_stacks for s in save)),
         flat,
     )
     meta = {
@@ -180,7 +169,7 @@ def cmd_reconstruct(args):
     frame = frames if frames.ndim == 2 else frames[0]
     with tqdm_callback("reconstructing", unit="iteration") as cb:
         result = rec.reconstruct(frame, progress=cb)
-    images = _result_images(result, save)
+    images = outputs.images(result, save)
     paths = _output_paths(out, images)
     for name, (data, axes, what) in images.items():
         write_ome_tiff(
@@ -202,7 +191,7 @@ def _reconstruct_series(source, recipe, rec, out, save, meta, args):
     report = reconstruct_series(
         source, out, recipe, save=save, meta=meta, workers=args.workers, scheduler=args.scheduler, rec=rec
     )
-    names = ", ".join(["ri"] + [s for s in SAVE_CHOICES if s in save])
+    names = ", ".join(["ri", *save])
     if report.written == 0:
         print(f"{out}: all {report.frames} frames were already written ({names})")
         return
@@ -247,7 +236,7 @@ def build_parser():
     )
     p.add_argument("--version", action="version", version=f"napari-ssdpc {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
-    optics_help = "optics YAML (schema of shared/paper-optics.yaml); default: the paper's optics"
+    optics_help = "optics YAML (schema of docs/paper-optics.yaml); default: the paper's optics"
 
     s = sub.add_parser("design", help="print the design numbers of an optics file (paper Eqs. 8-14)")
     s.add_argument("--optics", help=optics_help)
@@ -284,21 +273,10 @@ def build_parser():
     s.add_argument("--optics", help="optics YAML; default: the optics stored in the calibration")
     s.add_argument("--calibration", required=True, help="calibration JSON from `ssdpc calibrate`")
     s.add_argument("--flat", help="flat frame (no sample, same condenser NA) for flat-fielding")
-    s.add_argument("--z", type=float, nargs=2, metavar=("ZMIN", "ZMAX"), help="z range in µm (default -80 80)")
-    s.add_argument("--dz", type=float, help="slice spacing in µm (default 1)")
-    s.add_argument("--iterations", type=int, help="Richardson-Lucy iterations (default 15)")
-    s.add_argument("--alpha", type=float, help="Tikhonov regularisation (default 0.1 for wotf, 0.01 for rl)")
-    s.add_argument("--model", choices=("lenslet", "paper"), help="transfer-function model (default lenslet)")
-    s.add_argument("--method", choices=("wotf", "rl"), help="phase method (default wotf, see docs/validation.md)")
-    s.add_argument("--save", help=f"extra outputs, comma separated: {','.join(SAVE_CHOICES)}")
+    add_reconstruction_options(s)
+    s.add_argument("--save", help=f"extra outputs, comma separated: {','.join(outputs.SAVE_CHOICES)}")
     s.add_argument(
         "-o", "--output", required=True, help="OUT.ome.tif (one frame) or OUT.zarr (time series; a rerun resumes it)"
-    )
-    s.add_argument(
-        "--device",
-        choices=("cpu", "gpu"),
-        default="cpu",
-        help="where Richardson-Lucy runs: cpu (NumPy, default) or gpu (CuPy, pip install napari-ssdpc[gpu])",
     )
     s.add_argument("--workers", type=int, help="spread the frames of a series over a local Dask cluster of N workers")
     s.add_argument("--scheduler", help="spread the frames over an existing Dask cluster (tcp://host:8786)")

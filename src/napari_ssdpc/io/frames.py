@@ -6,36 +6,14 @@ all, so an error never leaves a half-written file over a good one.
 
 from __future__ import annotations
 
-import contextlib
 import json
-import os
-import tempfile
-import warnings
 from pathlib import Path
 
 import numpy as np
 import tifffile
 
-from napari_ssdpc.errors import SsdpcError, SsdpcWarning
-
-
-@contextlib.contextmanager
-def atomic_write(path):
-    """Yield a temporary path next to ``path``; move it over ``path`` only on success."""
-    path = Path(path)
-    if path.parent and not path.parent.exists():
-        raise SsdpcError(f"output folder does not exist: {path.parent} (create it first)")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent or ".")
-    os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    try:
-        yield Path(tmp)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the usual permissions
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.files import atomic_write
 
 
 def read_frame(path, *, allow_series: bool = True) -> np.ndarray:
@@ -53,33 +31,6 @@ def read_frame(path, *, allow_series: bool = True) -> np.ndarray:
     if data.ndim not in (2, 3):
         raise SsdpcError(f"{path}: expected a 2D frame or a (t, y, x) series, got shape {data.shape}")
     return data
-
-
-def saturated_fraction(frame, level=None) -> float:
-    """Fraction of pixels at the top of the range: ``level``, else the full scale of an
-    integer frame (2**b − 1 for a b-bit camera in a 16-bit container, b in 8..16)."""
-    a = np.asarray(frame)
-    top = level
-    if top is None:
-        if a.dtype.kind not in "ui" or a.size == 0:
-            return 0.0
-        m = int(a.max())
-        if m + 1 not in {2**b for b in range(8, 17)}:
-            return 0.0
-        top = m
-    return float(np.mean(a >= top))
-
-
-def warn_saturation(frame, name="frame", level=None, threshold=1e-4) -> float:
-    """Warn (SsdpcWarning) with the saturated fraction when it exceeds ``threshold``."""
-    frac = saturated_fraction(frame, level)
-    if frac > threshold:
-        warnings.warn(
-            f"{name}: {100 * frac:.3f}% of pixels are saturated; shorten the exposure or lower the illumination",
-            SsdpcWarning,
-            stacklevel=3,
-        )
-    return frac
 
 
 def write_tiff(path, data, *, metadata=None, **kwargs) -> Path:

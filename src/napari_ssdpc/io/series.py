@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.reconstruction import outputs
 
-SAVE_CHOICES = ("phase", "dpc", "stacks", "absorption", "delta_n")
 DONE = "ssdpc_done"  # root array: 1 where a frame is completely written
 _STAMP = "ssdpc_series"  # root attribute: what the store holds (input, settings, outputs)
 
@@ -166,45 +166,10 @@ def _reconstructor(recipe: Recipe):
 
 
 # ---------------------------------------------------------------- outputs
-def result_images(result, save) -> dict:
-    """{name: (array, axes, description)} of the requested outputs of one frame."""
-    out = {"ri": (result.ri, "ZYX", "refractive index")}
-    if "delta_n" in save:
-        out["delta_n"] = (result.delta_n, "ZYX", "refractive-index difference to the medium")
-    if "phase" in save:
-        out["phase"] = (result.phase, "ZYX", "phase per slab, rad")
-    if "absorption" in save:
-        out["absorption"] = (result.absorption, "ZYX", "absorption mu per slab")
-    if "dpc" in save:
-        out["dpc"] = (np.stack([result.dpc["ud"], result.dpc["lr"]]), "CZYX", "DPC up-down, left-right")
-    if "stacks" in save:
-        out["stacks"] = (
-            np.stack([result.stacks[h] for h in ("up", "down", "left", "right")]),
-            "CZYX",
-            "RL intensity stacks up, down, left, right",
-        )
-    return out
-
-
-def output_layout(rec, save) -> dict:
-    """{name: (shape per frame, axes, description)} without reconstructing anything."""
-    z, (ny, nx) = len(rec.z_um), rec.mask.shape
-    vol = (z, ny, nx)
-    table = {
-        "ri": (vol, "ZYX", "refractive index"),
-        "delta_n": (vol, "ZYX", "refractive-index difference to the medium"),
-        "phase": (vol, "ZYX", "phase per slab, rad"),
-        "absorption": (vol, "ZYX", "absorption mu per slab"),
-        "dpc": ((2,) + vol, "CZYX", "DPC up-down, left-right"),
-        "stacks": ((4,) + vol, "CZYX", "RL intensity stacks up, down, left, right"),
-    }
-    return {n: table[n] for n in ["ri"] + [s for s in SAVE_CHOICES if s in save]}
-
-
 def _describe(recipe: Recipe, save):
     rec = _reconstructor(recipe)
     dz, dy = rec.dz, rec.pixel_um
-    return output_layout(rec, save), (dz, dy, dy), rec.settings(), rec.build_seconds
+    return outputs.layout(len(rec.z_um), rec.mask.shape, save), (dz, dy, dy), rec.settings(), rec.build_seconds
 
 
 # ------------------------------------------------------------------ store
@@ -274,7 +239,7 @@ def process_frame(rec_or_recipe, source: FrameSource, t: int, out, save) -> dict
     t1 = time.perf_counter()
     result = rec.reconstruct(frame)
     t2 = time.perf_counter()
-    write = _write_frame(Path(out), t, result_images(result, save))
+    write = _write_frame(Path(out), t, outputs.images(result, save))
     return {"t": int(t), "read_s": t1 - t0, "reconstruct_s": t2 - t1, "write_s": write, **result.timings}
 
 
@@ -316,9 +281,7 @@ def reconstruct_series(
     if not out.parent.exists():
         raise SsdpcError(f"output folder does not exist: {out.parent} (create it first)")
     save = [s for s in save]
-    bad = [s for s in save if s not in SAVE_CHOICES]
-    if bad:
-        raise SsdpcError(f"unknown output {','.join(bad)}; choose from {','.join(SAVE_CHOICES)}")
+    save = outputs.parse_save(save)
     if workers is not None and workers < 1:
         raise SsdpcError(f"--workers must be >= 1, got {workers}")
     distributed = workers is not None or scheduler is not None
@@ -337,7 +300,7 @@ def reconstruct_series(
         else:
             rec = recipe.build() if rec is None else rec
             layout, voxel, settings, build = (
-                output_layout(rec, save),
+                outputs.layout(len(rec.z_um), rec.mask.shape, save),
                 (rec.dz, rec.pixel_um, rec.pixel_um),
                 rec.settings(),
                 rec.build_seconds,

@@ -1,7 +1,7 @@
 """Geometry of the lenslet lattice on the sensor, shared by the simulator and calibration.
 
 Frames of reference
-- MLA frame: x right, y down (the object axes of DESIGN.md §3), in µm on the MLA.
+- MLA frame: x right, y down (the object axes of docs/conventions.md), in µm on the MLA.
 - Sensor frame: x = column, y = row, in pixels, origin at the centre of pixel (0, 0).
 
 A displacement ``d`` in the MLA frame (expressed in sensor pixels) lands on the sensor

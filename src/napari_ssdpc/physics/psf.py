@@ -1,6 +1,6 @@
 """Wave-optics PSF of the Fourier light-field microscope (paper Eq. 6) and its fast per-lenslet form.
 
-Physics (DESIGN.md §3, paper Eq. 6). A point at (0, 0, z) has, in the focal plane, the angular
+Physics (docs/conventions.md, paper Eq. 6). A point at (0, 0, z) has, in the focal plane, the angular
 spectrum exp(i2π z η(u)) with η(u) = sqrt((n/λ)² − |u|²) (forward propagation by +z). The
 objective passes |u| ≤ NA/λ, and the relay puts frequency u at x_mla = −λ f_obj m_r u on the MLA
 (the M_relay scaling of Eq. 6, inverted). Lenslet k multiplies by the transmittance
@@ -296,8 +296,7 @@ class LensletPSF:
         (truncation error below 0.1% relative L2 for the paper's optics)."""
         o = self.optics
         if z_max_um is None:
-            rec = o.reconstruction
-            z_max_um = max(abs(float(rec["z_min_um"])), abs(float(rec["z_max_um"])))
+            z_max_um = 80.0  # the default z range, ±80 µm
         cos3 = (1.0 - (o.na / o.medium_index) ** 2) ** 1.5
         blur = abs(z_max_um) * o.subaperture_na / (o.medium_index * cos3)
         airy = 0.61 * o.wavelength_um / o.subaperture_na

@@ -1,4 +1,4 @@
-"""Weak-object transfer functions for a general source S and pupil P (paper Eqs. 2-4, DESIGN.md §4).
+"""Weak-object transfer functions for a general source S and pupil P (paper Eqs. 2-4, docs/conventions.md).
 
 Intensity model, first order in μ and φ, with o = exp(−μ + iφ) ≈ 1 − μ + iφ, plane waves
 exp(+i2π w·x) and a source normalised by its power ∫S:
@@ -11,19 +11,19 @@ exp(+i2π w·x) and a source normalised by its power ∫S:
     H_phase(u) = i [W(u) − W*(−u)]       imaginary and odd in focus (real S and P)
 
 so absorption lowers the intensity by H_abs·μ and a phase adds H_phase·φ. The factor i is the one
-paper Eq. 4 leaves out when it writes H_phi = WOTF*(u) − WOTF(−u) (DESIGN.md §4.3).
+paper Eq. 4 leaves out when it writes H_phi = WOTF*(u) − WOTF(−u) (docs/conventions.md).
 
 Two models give the transfer functions of each half (up, down, left, right) of paper Eq. 5:
 - 'paper': half of the condenser disk as the source, the full objective pupil (paper Eq. 4).
 - 'lenslet': the full condenser disk and the sub-apertures of the lenslets of that half; the EIs
-  of the lenslets add, so H_half = Σ_k H_k and I0_half = Σ_k I0_k (DESIGN.md §4.1-4.2).
+  of the lenslets add, so H_half = Σ_k H_k and I0_half = Σ_k I0_k (docs/conventions.md).
 The lenslet at a_y < 0 ("up") sees frequencies u_y > 0 (u_k = −a/(λ f_obj m_r)), so the
 'paper' half-source of "up" is w_y > 0, and likewise "left" is w_x > 0.
 
 For DPC = (I1 − I2)/(I1 + I2) the first-order transfer function is
     H_DPC = 2 (I0_2 H_1 − I0_1 H_2) / (I0_1 + I0_2)²,
 which is H_1/I0_1 when the halves mirror each other: the phase TF of one half normalised by that
-half's own background, not by the full aperture and not doubled (DESIGN.md §4.3).
+half's own background, not by the full aperture and not doubled (docs/conventions.md).
 """
 
 from __future__ import annotations
@@ -102,7 +102,7 @@ def _embed(a, shape):
 # ------------------------------------------------------------ the two models
 def lenslet_case(optics: Optics, lenslet: Lenslet) -> str:
     """'inside' (sub-aperture within the source disk: defocus contrast only), 'straddling'
-    (DPC-like) or 'outside' (dark field), DESIGN.md §4.2."""
+    (DPC-like) or 'outside' (dark field), docs/conventions.md."""
     d = math.hypot(*lenslet.u)
     rho, rs = optics.subaperture_radius, optics.source_radius
     if d + rho <= rs:
@@ -118,7 +118,7 @@ def _frequency_steps(shape, pixel_um):
 
 def lenslet_transfer_functions(optics: Optics, lenslets, shape, pixel_um, z_um=0.0, oversample=1):
     """(H_abs, H_phase) of each lenslet (K, [Z,] ny, nx) and their I0 (K,): full condenser disk,
-    sub-aperture P_obj·circ_k (DESIGN.md §4.1). ``oversample`` samples the pupil r times finer
+    sub-aperture P_obj·circ_k (docs/conventions.md). ``oversample`` samples the pupil r times finer
     than the output grid (r = 1 is within 0.1% of the exact integral for the paper's optics)."""
     setup = _LensletSetup(optics, lenslets, shape, pixel_um, oversample)
     zs = np.atleast_1d(np.asarray(z_um, dtype=float))
@@ -193,7 +193,7 @@ def paper_transfer_functions(optics: Optics, shape, pixel_um, z_um=0.0):
     pupil = soft_disk(np.hypot(fx, fy), r, step).astype(complex)
     eta = axial_frequency(fx, fy, optics)
     norm = _disk_power(optics.source_radius, du)
-    # "up" sees u_y > 0 (DESIGN.md §3); the half-plane edge gets half weight
+    # "up" sees u_y > 0 (docs/conventions.md); the half-plane edge gets half weight
     sides = {"up": fy / du[0], "down": -fy / du[0], "left": fx / du[1], "right": -fx / du[1]}
     out = {}
     for half, coord in sides.items():
@@ -220,7 +220,7 @@ def dpc_transfer_functions(
       'freq': (fy, fx) cycles/µm, 'z_um', 'model'.
     Warns (SsdpcWarning) when the in-focus phase contrast is too weak to invert.
     """
-    model = model or optics.reconstruction.get("model", "lenslet")
+    model = model or "lenslet"
     if model not in ("lenslet", "paper"):
         raise SsdpcError(f"unknown transfer model '{model}'; use 'lenslet' or 'paper'")
     if not optics.condenser_na > 0:

@@ -1,4 +1,4 @@
-"""Array backend: NumPy on the CPU (default), CuPy on a CUDA GPU when asked and present (DESIGN.md §2).
+"""Array backend: NumPy on the CPU (default), CuPy on a CUDA GPU when asked and present.
 
 The reconstruction code takes a :class:`Backend` and writes ``bk.xp`` where it would write ``np``
 and ``bk.rfft2(...)`` where it would write ``scipy.fft.rfft2(...)``; the same lines then run on

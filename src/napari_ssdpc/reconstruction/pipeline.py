@@ -1,6 +1,6 @@
 """The ssDPC reconstruction: one raw frame in, a 3D refractive-index volume out.
 
-Per frame (paper §2 and §3.2, DESIGN.md §4):
+Per frame (paper §2 and §3.2, docs/conventions.md):
 1. dark subtraction, EI extraction with the calibration, flat-fielding view by view
    (each view's direct-light background becomes 1), clipping at zero;
 2. four directional light fields (Eq. 5): the views of the up, down, left and right halves,
@@ -17,7 +17,7 @@ Per frame (paper §2 and §3.2, DESIGN.md §4):
    Then Δn = λφ/(2π dz) and n = n_medium + Δn.
 
 Lenslets that receive no direct light at this condenser NA (dark field) carry no first-order
-phase signal (DESIGN.md §4.2) and are left out of the halves.
+phase signal (docs/conventions.md) and are left out of the halves.
 """
 
 from __future__ import annotations
@@ -31,15 +31,17 @@ import numpy as np
 import scipy.fft as sfft
 
 from napari_ssdpc.calibration.calibrate import Calibration, extract_views
+from napari_ssdpc.calibration.saturation import warn_saturation
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
-from napari_ssdpc.io.frames import warn_saturation
 from napari_ssdpc.physics import transfer
+from napari_ssdpc.physics.design import design
 from napari_ssdpc.physics.psf import LensletPSF
 from napari_ssdpc.reconstruction.backend import get_backend
 from napari_ssdpc.reconstruction.deconvolution import Band, MultiViewRL
 from napari_ssdpc.reconstruction.dpc import dpc_image, phase_to_delta_n, tikhonov_phase
 from napari_ssdpc.reconstruction.wotf import WotfInversion
-from napari_ssdpc.settings.optics import DEFAULT_ALPHA, PHASE_METHODS, TRANSFER_MODELS, Optics
+from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.settings.reconstruction import DEFAULT_ALPHA, PHASE_METHODS, TRANSFER_MODELS, ReconstructionSettings
 
 HALVES = ("up", "down", "left", "right")
 PAIRS = {"ud": ("up", "down"), "lr": ("left", "right")}
@@ -104,6 +106,7 @@ class Reconstructor:
         self,
         optics: Optics,
         calibration: Calibration,
+        settings: ReconstructionSettings | None = None,
         *,
         z=None,
         dz=None,
@@ -116,10 +119,10 @@ class Reconstructor:
         stacks: bool = True,
         min_light: float = 0.05,
         progress=None,
-        device="cpu",
+        device=None,
     ):
-        rec = optics.reconstruction
-        self.backend = get_backend(device)  # 'cpu' (NumPy) or 'gpu' (CuPy): where Richardson-Lucy runs
+        rec = (settings or ReconstructionSettings()).to_dict()
+        self.backend = get_backend(device or rec["device"])  # 'cpu' (NumPy) or 'gpu' (CuPy): where RL runs
         self.optics = optics
         self.calibration = calibration
         z_min, z_max = (rec["z_min_um"], rec["z_max_um"]) if z is None else z
@@ -148,7 +151,7 @@ class Reconstructor:
 
     # ------------------------------------------------------------ set-up
     def _check_depth_of_field(self):
-        dof = self.optics.design()["dof_um"]
+        dof = design(self.optics)["dof_um"]
         reach = max(abs(self.z_um[0]), abs(self.z_um[-1]))
         if reach > dof / 2:
             warnings.warn(

@@ -1,7 +1,7 @@
 """3D phase from the lenslet views by a linear inversion of their weak-object transfer functions.
 
 Each flat-fielded view k holds the contrast c_k = I_k / I0_k − 1 of every slice of the sample,
-each through its own defocused WOTF (DESIGN.md §4.1, paper Eqs. 2-4):
+each through its own defocused WOTF (docs/conventions.md, paper Eqs. 2-4):
 
     F[c_k](u) = Σ_z H_k(u; z) / I0_k · F[φ_z](u)          (phase part, first order)
 
@@ -12,7 +12,7 @@ from 2 DPC images to K views and Z slices) is, per spatial frequency u,
 
 so the per-frame cost is K FFTs, a small solve per frequency and Z inverse FFTs. The weights W
 follow the shot noise: a dim view has a noisier normalised contrast. φ_z is the phase of a slab
-of thickness dz, so Δn = λ φ_z / (2π dz) (DESIGN.md §4.4).
+of thickness dz, so Δn = λ φ_z / (2π dz) (docs/conventions.md).
 """
 
 from __future__ import annotations

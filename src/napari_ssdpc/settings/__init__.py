@@ -1,1 +1,11 @@
-"""settings"""
+"""Settings: the instrument, the reconstruction settings and the run configuration.
+
+Pydantic models with strict types, units in the field names, value ranges in one place and
+one-line errors that name the key, the value and the fix.
+"""
+
+from napari_ssdpc.settings.config import RunConfig
+from napari_ssdpc.settings.optics import MLA, Lenslet, Objective, Optics, Sensor
+from napari_ssdpc.settings.reconstruction import ReconstructionSettings
+
+__all__ = ["MLA", "Lenslet", "Objective", "Optics", "ReconstructionSettings", "RunConfig", "Sensor"]

@@ -1,70 +1,51 @@
-"""Optics of a Fourier light-field microscope and the paper's design calculator.
+"""The instrument: objective, Fourier lens, microlens array (MLA), sensor and condenser.
 
-The schema is the one of ``shared/paper-optics.yaml``: every length carries its unit
-in the key (``_um``, ``_mm``, ``_px``). Object-space lengths are micrometres, spatial
-frequencies are cycles per micrometre, and the wavelength is the vacuum wavelength.
+One pydantic model per physical part, nested as in the optics YAML file (see
+``docs/paper-optics.yaml``): every length carries its unit in the key (``_um``, ``_mm``,
+``_px``). Object-space lengths are micrometres, spatial frequencies cycles per micrometre, and
+the wavelength is the vacuum wavelength. The value ranges live once, in the field definitions;
+a value outside its range almost always means a wrong unit.
 
-Conventions (DESIGN.md §3): the lenslet at MLA position ``a`` (µm, measured from the
-optical axis) sees the pupil sub-aperture centred at ``u_k = -a / (λ f_obj m_r)``.
+Geometry (docs/conventions.md): the lenslet at MLA position ``a`` (µm, measured from the optical
+axis) sees the pupil sub-aperture centred at ``u_k = -a / (λ f_obj m_r)``: the tube-lens /
+Fourier-lens relay inverts the back focal plane onto the MLA.
 """
 
 from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Literal
 
 import numpy as np
 import yaml
+from pydantic import Field, model_validator
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
+from napari_ssdpc.settings.base import SettingsModel, bounded
+from napari_ssdpc.settings.files import read_mapping
 
-#: Reconstruction settings that a ``reconstruction:`` section may hold, with defaults.
-RECONSTRUCTION_DEFAULTS = {
-    "z_min_um": -80.0,
-    "z_max_um": 80.0,
-    "dz_um": 1.0,
-    "rl_iterations": 15,
-    "tikhonov_alpha": None,  # None: the method's default (DEFAULT_ALPHA)
-    "model": "lenslet",
-    "method": "wotf",
-}
-TRANSFER_MODELS = ("lenslet", "paper")
-#: 'wotf': 3D Tikhonov over all views with their defocused WOTFs; 'rl': the paper's route
-#: (Richardson-Lucy per half, DPC per slice, 2D Tikhonov with the in-focus DPC transfer function).
-PHASE_METHODS = ("wotf", "rl")
-#: Tikhonov alpha per method: 'rl' on the |H_DPC|² scale of Eq. 7, 'wotf' relative to the strongest
-#: view's |H|² summed over z (docs/validation.md).
-DEFAULT_ALPHA = {"wotf": 0.1, "rl": 0.01}
+__all__ = [
+    "GRIDS",
+    "HALVES",
+    "MLA",
+    "PAIRS",
+    "PAPER_OPTICS",
+    "Lenslet",
+    "Objective",
+    "Optics",
+    "Sensor",
+    "circle_overlap_fraction",
+]
 
-# Sanity ranges: a value outside them almost always means a wrong unit.
-_RANGES = {
-    "wavelength_um": (0.2, 2.0, "µm (520 nm is 0.52)"),
-    "medium_index": (1.0, 2.5, ""),
-    "condenser_na": (0.0, 1.6, ""),
-    "objective.magnification": (1.0, 200.0, "x"),
-    "objective.na": (0.01, 1.7, ""),
-    "objective.tube_lens_mm": (20.0, 1000.0, "mm (a tube lens is 160-200 mm)"),
-    "fourier_lens_mm": (5.0, 2000.0, "mm"),
-    "mla.pitch_um": (10.0, 10000.0, "µm (500 µm is 0.5 mm)"),
-    "mla.focal_length_mm": (0.1, 500.0, "mm"),
-    "mla.lenslet_radius_um": (5.0, 10000.0, "µm"),
-    "sensor.pixel_um": (0.5, 50.0, "µm"),
-    "sensor.width_px": (16, 100000, "px"),
-    "sensor.height_px": (16, 100000, "px"),
-}
-_SCHEMA = {
-    "wavelength_um": None,
-    "medium_index": None,
-    "condenser_na": None,
-    "objective": ("magnification", "na", "tube_lens_mm"),
-    "fourier_lens_mm": None,
-    "mla": ("pitch_um", "focal_length_mm", "lenslet_radius_um", "grid"),
-    "sensor": ("pixel_um", "width_px", "height_px"),
-}
-_OPTIONAL = {"flip_x", "flip_y", "iris_radius_um", "reconstruction", "name"}
-GRIDS = ("square",)
+GRIDS = ("square", "hex")
+#: The four halves of paper Eq. 5, by the sign of the lenslet position a (x right, y down):
+#: "up" = a_y < 0, "down" = a_y > 0, "left" = a_x < 0, "right" = a_x > 0.
+HALVES = ("up", "down", "left", "right")
+#: The two DPC pairs of paper Eq. 1: I_DPC = (first - second) / (first + second).
+PAIRS = {"ud": ("up", "down"), "lr": ("left", "right")}
 
 
 @dataclass(frozen=True)
@@ -87,7 +68,7 @@ class Lenslet:
 
     @property
     def halves(self) -> tuple[str, ...]:
-        """Halves of paper Eq. 5 this lenslet belongs to (DESIGN.md §3)."""
+        """Halves of paper Eq. 5 this lenslet belongs to (:data:`HALVES`)."""
         ax, ay = self.a_um
         out = []
         if ay < 0:
@@ -118,106 +99,116 @@ def circle_overlap_fraction(d, r_small, r_big):
     return out
 
 
-@dataclass(frozen=True)
-class Optics:
-    """Instrument description (schema of ``shared/paper-optics.yaml``)."""
+class Objective(SettingsModel):
+    """The microscope objective."""
 
-    wavelength_um: float
-    medium_index: float
-    condenser_na: float
-    magnification: float
-    na: float
-    tube_lens_mm: float
-    fourier_lens_mm: float
-    pitch_um: float
-    mla_focal_length_mm: float
-    lenslet_radius_um: float
-    pixel_um: float
-    width_px: int
-    height_px: int
-    grid: str = "square"
-    iris_radius_um: float | None = None  # at the native image plane; None = EIs tangent (Eq. 9)
-    flip_x: bool = False
-    flip_y: bool = False
-    reconstruction: dict = field(default_factory=lambda: dict(RECONSTRUCTION_DEFAULTS))
-    name: str = ""
+    magnification: float = bounded(..., 1.0, 200.0, "lateral magnification with its tube lens (x)")
+    na: float = bounded(..., 0.01, 1.7, "numerical aperture")
+    tube_lens_mm: float = bounded(..., 20.0, 1000.0, "tube-lens focal length, mm (160-200 mm is usual)")
 
-    def __post_init__(self):
-        self.validate()
+
+class MLA(SettingsModel):
+    """The microlens array, in a plane conjugate to the objective's back focal plane."""
+
+    pitch_um: float = bounded(..., 10.0, 10000.0, "lenslet pitch, µm (500 µm is 0.5 mm)")
+    focal_length_mm: float = bounded(..., 0.1, 500.0, "lenslet focal length, mm")
+    lenslet_radius_um: float = bounded(..., 5.0, 10000.0, "lenslet aperture radius, µm")
+    grid: Literal["square", "hex"] = Field("square", description="lattice of the array: square or hex")
+
+    @model_validator(mode="after")
+    def _radius_fits(self) -> MLA:
+        if self.lenslet_radius_um > 0.5 * self.pitch_um * 1.0001:
+            raise ValueError(
+                f"mla.lenslet_radius_um {self.lenslet_radius_um} exceeds half the pitch {self.pitch_um} µm; "
+                "check mla.lenslet_radius_um"
+            )
+        return self
+
+
+class Sensor(SettingsModel):
+    """The camera."""
+
+    pixel_um: float = bounded(..., 0.5, 50.0, "pixel pitch, µm")
+    width_px: int = bounded(..., 16, 100000, "frame width, px")
+    height_px: int = bounded(..., 16, 100000, "frame height, px")
+
+
+#: Flat attribute names of :class:`Optics` that live in a part (for ``Optics.replace``).
+_PART_KEYS = {
+    "magnification": ("objective", "magnification"),
+    "na": ("objective", "na"),
+    "tube_lens_mm": ("objective", "tube_lens_mm"),
+    "pitch_um": ("mla", "pitch_um"),
+    "mla_focal_length_mm": ("mla", "focal_length_mm"),
+    "lenslet_radius_um": ("mla", "lenslet_radius_um"),
+    "grid": ("mla", "grid"),
+    "pixel_um": ("sensor", "pixel_um"),
+    "width_px": ("sensor", "width_px"),
+    "height_px": ("sensor", "height_px"),
+}
+
+
+class Optics(SettingsModel):
+    """The instrument (the schema of the optics YAML file).
+
+    Attributes of the parts are also readable flat (``optics.na``, ``optics.pitch_um``,
+    ``optics.mla_focal_length_mm``, ``optics.pixel_um``...), and :meth:`replace` takes those
+    flat names.
+    """
+
+    name: str = Field("", description="a name for the instrument")
+    wavelength_um: float = bounded(..., 0.2, 2.0, "vacuum wavelength, µm (520 nm is 0.52)")
+    medium_index: float = bounded(..., 1.0, 2.5, "refractive index of the immersion/mounting medium")
+    condenser_na: float = bounded(..., 0.0, 1.6, "illumination (condenser) NA; below the objective NA")
+    objective: Objective
+    fourier_lens_mm: float = bounded(..., 5.0, 2000.0, "Fourier-lens focal length, mm")
+    mla: MLA
+    sensor: Sensor
+    iris_radius_um: float | None = bounded(
+        None, 1.0, 100000.0, "field-stop radius at the native image plane, µm; empty: EIs just touch (Eq. 9)"
+    )
+    flip_x: bool = Field(False, description="the camera mirrors x (columns)")
+    flip_y: bool = Field(False, description="the camera mirrors y (rows)")
+
+    @model_validator(mode="after")
+    def _physical(self) -> Optics:
+        if self.objective.na >= self.medium_index:
+            raise ValueError(
+                f"objective.na {self.objective.na} must be below medium_index {self.medium_index}; check both"
+            )
+        self.check_condenser()
+        return self
 
     # ------------------------------------------------------------------ loading
     @classmethod
-    def from_dict(cls, d: dict, source: str = "optics") -> Optics:
-        """Build from a dict in the YAML schema; one-line errors for bad content."""
-        if not isinstance(d, dict):
-            raise SsdpcError(f"{source}: expected a mapping of optics keys, got {type(d).__name__}")
-        for key, sub in _SCHEMA.items():
-            if key not in d:
-                raise SsdpcError(f"{source}: missing key '{key}' (see shared/paper-optics.yaml)")
-            if sub is not None:
-                if not isinstance(d[key], dict):
-                    raise SsdpcError(f"{source}: '{key}' must be a mapping with keys {', '.join(sub)}")
-                for s in sub:
-                    if s not in d[key]:
-                        hint = _unit_hint(s, d[key])
-                        raise SsdpcError(f"{source}: missing key '{key}.{s}'{hint}")
-                for s in d[key]:
-                    if s not in sub:
-                        raise SsdpcError(f"{source}: unknown key '{key}.{s}'{_unit_hint(s, sub, unknown=True)}")
-        for key in d:
-            if key not in _SCHEMA and key not in _OPTIONAL:
-                raise SsdpcError(
-                    f"{source}: unknown key '{key}'{_unit_hint(key, list(_SCHEMA) + list(_OPTIONAL), unknown=True)}"
-                )
-        rec = dict(RECONSTRUCTION_DEFAULTS)
-        extra = d.get("reconstruction") or {}
-        if not isinstance(extra, dict):
-            raise SsdpcError(f"{source}: 'reconstruction' must be a mapping")
-        for k in extra:
-            if k not in RECONSTRUCTION_DEFAULTS:
-                raise SsdpcError(
-                    f"{source}: unknown key 'reconstruction.{k}' (allowed: {', '.join(RECONSTRUCTION_DEFAULTS)})"
-                )
-        rec.update(extra)
-        o, m, s = d["objective"], d["mla"], d["sensor"]
-        try:
-            return cls(
-                wavelength_um=_num(d, "wavelength_um", source),
-                medium_index=_num(d, "medium_index", source),
-                condenser_na=_num(d, "condenser_na", source, allow_zero=True),
-                magnification=_num(o, "magnification", source, "objective."),
-                na=_num(o, "na", source, "objective."),
-                tube_lens_mm=_num(o, "tube_lens_mm", source, "objective."),
-                fourier_lens_mm=_num(d, "fourier_lens_mm", source),
-                pitch_um=_num(m, "pitch_um", source, "mla."),
-                mla_focal_length_mm=_num(m, "focal_length_mm", source, "mla."),
-                lenslet_radius_um=_num(m, "lenslet_radius_um", source, "mla."),
-                grid=str(m["grid"]),
-                pixel_um=_num(s, "pixel_um", source, "sensor."),
-                width_px=int(_num(s, "width_px", source, "sensor.")),
-                height_px=int(_num(s, "height_px", source, "sensor.")),
-                iris_radius_um=None if d.get("iris_radius_um") is None else _num(d, "iris_radius_um", source),
-                flip_x=bool(d.get("flip_x", False)),
-                flip_y=bool(d.get("flip_y", False)),
-                reconstruction=rec,
-                name=str(d.get("name", "")),
-            )
-        except SsdpcError as e:
-            msg = str(e)
-            raise SsdpcError(msg if msg.startswith(source) else f"{source}: {msg}") from None
+    def from_dict(cls, data: Any, source: str = "optics") -> Optics:
+        """Validate an optics mapping (a ``reconstruction:`` section in it is checked and set aside).
+
+        Parameters
+        ----------
+        data : dict
+            Keys as in the optics YAML file.
+        source : str
+            Where it came from, for the messages.
+
+        Returns
+        -------
+        Optics
+        """
+        if isinstance(data, dict) and "reconstruction" in data:
+            from napari_ssdpc.settings.reconstruction import ReconstructionSettings
+
+            data = dict(data)
+            ReconstructionSettings.from_dict(data.pop("reconstruction") or {}, source=f"{source} reconstruction")
+        return super().from_dict(data, source)
 
     @classmethod
-    def from_yaml(cls, path) -> Optics:
-        path = Path(path)
-        if not path.is_file():
-            raise SsdpcError(f"optics file not found: {path} (give the path to a YAML like shared/paper-optics.yaml)")
-        try:
-            d = yaml.safe_load(path.read_text())
-        except yaml.YAMLError as e:
-            line = getattr(getattr(e, "problem_mark", None), "line", None)
-            where = f" at line {line + 1}" if line is not None else ""
-            raise SsdpcError(f"{path}: not valid YAML{where}; fix the syntax") from None
-        return cls.from_dict(d, source=str(path))
+    def from_yaml(cls, path: str | Path) -> Optics:
+        """Read an optics YAML file, or the ``optics:`` section of a run configuration."""
+        data = read_mapping(path, "optics file")
+        if "optics" in data and isinstance(data["optics"], dict):
+            data = data["optics"]
+        return cls.from_dict(data, source=str(path))
 
     @classmethod
     def paper(cls) -> Optics:
@@ -225,103 +216,83 @@ class Optics:
         return cls.from_dict(PAPER_OPTICS, source="paper optics")
 
     def to_dict(self) -> dict:
-        d = {
-            "wavelength_um": self.wavelength_um,
-            "medium_index": self.medium_index,
-            "condenser_na": self.condenser_na,
-            "objective": {"magnification": self.magnification, "na": self.na, "tube_lens_mm": self.tube_lens_mm},
-            "fourier_lens_mm": self.fourier_lens_mm,
-            "mla": {
-                "pitch_um": self.pitch_um,
-                "focal_length_mm": self.mla_focal_length_mm,
-                "lenslet_radius_um": self.lenslet_radius_um,
-                "grid": self.grid,
-            },
-            "sensor": {"pixel_um": self.pixel_um, "width_px": self.width_px, "height_px": self.height_px},
-            "flip_x": self.flip_x,
-            "flip_y": self.flip_y,
-            "reconstruction": dict(self.reconstruction),
-        }
-        if self.iris_radius_um is not None:
-            d["iris_radius_um"] = self.iris_radius_um
-        if self.name:
-            d["name"] = self.name
+        """The YAML schema as a plain mapping (``iris_radius_um`` only when set)."""
+        d = super().to_dict()
+        if d["iris_radius_um"] is None:
+            del d["iris_radius_um"]
         return d
 
-    def to_yaml(self, path) -> None:
-        Path(path).write_text(yaml.safe_dump(self.to_dict(), sort_keys=False))
+    def to_yaml(self, path: str | Path) -> None:
+        """Write the optics YAML file."""
+        Path(path).write_text(yaml.safe_dump(self.to_dict(), sort_keys=False), encoding="utf-8")
 
-    def replace(self, **changes) -> Optics:
-        """A copy with some fields changed (validated again)."""
-        return replace(self, **changes)
-
-    # --------------------------------------------------------------- validation
-    def validate(self) -> None:
-        flat = asdict(self)
-        names = {
-            "objective.magnification": "magnification",
-            "objective.na": "na",
-            "objective.tube_lens_mm": "tube_lens_mm",
-            "mla.pitch_um": "pitch_um",
-            "mla.focal_length_mm": "mla_focal_length_mm",
-            "mla.lenslet_radius_um": "lenslet_radius_um",
-            "sensor.pixel_um": "pixel_um",
-            "sensor.width_px": "width_px",
-            "sensor.height_px": "height_px",
-        }
-        for key, (lo, hi, unit) in _RANGES.items():
-            v = flat[names.get(key, key)]
-            if not (isinstance(v, (int, float)) and math.isfinite(v)):
-                raise SsdpcError(f"'{key}' must be a finite number, got {v!r}")
-            if key != "condenser_na" and v <= 0:
-                raise SsdpcError(f"'{key}' must be positive, got {v}")
-            if not lo <= v <= hi:
-                raise SsdpcError(f"'{key}' = {v} is outside {lo}-{hi}; check the unit{': ' + unit if unit else ''}")
-        if self.grid not in GRIDS:
-            raise SsdpcError(f"unknown MLA grid '{self.grid}'; supported: {', '.join(GRIDS)}")
-        if self.na >= self.medium_index:
-            raise SsdpcError(f"objective NA {self.na} must be below the medium index {self.medium_index}")
-        if self.condenser_na < 0:
-            raise SsdpcError(f"condenser_na must be >= 0, got {self.condenser_na}")
-        if self.lenslet_radius_um > 0.5 * self.pitch_um * 1.0001:
-            raise SsdpcError(
-                f"lenslet radius {self.lenslet_radius_um} µm exceeds half the pitch {self.pitch_um} µm; check mla.lenslet_radius_um"  # noqa: E501
-            )
-        if self.iris_radius_um is not None and self.iris_radius_um <= 0:
-            raise SsdpcError(f"'iris_radius_um' must be positive, got {self.iris_radius_um}")
-        rec = self.reconstruction
-        if rec.get("model") not in TRANSFER_MODELS:
-            raise SsdpcError(
-                f"reconstruction.model must be one of {', '.join(TRANSFER_MODELS)}, got {rec.get('model')!r}"
-            )
-        if rec.get("method") not in PHASE_METHODS:
-            raise SsdpcError(
-                f"reconstruction.method must be one of {', '.join(PHASE_METHODS)}, got {rec.get('method')!r}"
-            )
-        if not float(rec["dz_um"]) > 0:
-            raise SsdpcError(f"reconstruction.dz_um must be > 0, got {rec['dz_um']}")
-        if not float(rec["z_max_um"]) >= float(rec["z_min_um"]):
-            raise SsdpcError("reconstruction.z_max_um must be >= z_min_um")
-        if int(rec["rl_iterations"]) < 1:
-            raise SsdpcError(f"reconstruction.rl_iterations must be >= 1, got {rec['rl_iterations']}")
-        if rec["tikhonov_alpha"] is not None and not float(rec["tikhonov_alpha"]) > 0:
-            raise SsdpcError(f"reconstruction.tikhonov_alpha must be > 0, got {rec['tikhonov_alpha']}")
-        self.check_condenser()
+    def replace(self, **changes: Any) -> Optics:
+        """A validated copy with some fields changed; parts' fields may be named flat (``na=0.3``)."""
+        d = self.to_dict()
+        for key, value in changes.items():
+            if key in _PART_KEYS:
+                part, sub = _PART_KEYS[key]
+                d[part] = {**d[part], sub: value}
+            else:
+                d[key] = value
+        return type(self).from_dict(d, source="optics")
 
     def check_condenser(self) -> None:
-        """σ >= 1 is an error, σ > 0.8 a warning (DESIGN.md §4.2)."""
-        if self.condenser_na >= self.na:
+        """sigma >= 1 is an error (no phase contrast with a split detection pupil), > 0.8 a warning."""
+        na = self.objective.na
+        if self.condenser_na >= na:
             raise SsdpcError(
-                f"condenser_na {self.condenser_na} >= objective NA {self.na}: no phase contrast with a split "
-                "detection pupil, see DESIGN.md §4.2; close the condenser aperture (e.g. condenser_na 0.1-0.3)"
+                f"condenser_na {self.condenser_na} >= objective NA {na}: no phase contrast with a split "
+                "detection pupil (docs/conventions.md); close the condenser aperture (e.g. condenser_na 0.3 x NA)"
             )
-        if self.condenser_na > 0.8 * self.na:
+        if self.condenser_na > 0.8 * na:
             warnings.warn(
-                f"condenser_na {self.condenser_na} is above 0.8 x objective NA ({self.sigma:.2f} coherence ratio): "
+                f"condenser_na {self.condenser_na} is above 0.8 x objective NA (coherence ratio {self.sigma:.2f}): "
                 "phase contrast is weak; close the condenser aperture for a better phase signal",
                 SsdpcWarning,
                 stacklevel=3,
             )
+
+    # ----------------------------------------------------- flat part attributes
+    @property
+    def magnification(self) -> float:
+        return self.objective.magnification
+
+    @property
+    def na(self) -> float:
+        return self.objective.na
+
+    @property
+    def tube_lens_mm(self) -> float:
+        return self.objective.tube_lens_mm
+
+    @property
+    def pitch_um(self) -> float:
+        return self.mla.pitch_um
+
+    @property
+    def mla_focal_length_mm(self) -> float:
+        return self.mla.focal_length_mm
+
+    @property
+    def lenslet_radius_um(self) -> float:
+        return self.mla.lenslet_radius_um
+
+    @property
+    def grid(self) -> str:
+        return self.mla.grid
+
+    @property
+    def pixel_um(self) -> float:
+        return self.sensor.pixel_um
+
+    @property
+    def width_px(self) -> int:
+        return self.sensor.width_px
+
+    @property
+    def height_px(self) -> int:
+        return self.sensor.height_px
 
     # ------------------------------------------------------- derived quantities
     @property
@@ -402,7 +373,7 @@ class Optics:
         return self.condenser_na / self.wavelength_um
 
     def mla_to_frequency(self, a_um):
-        """u_k = -a / (λ f_obj m_r) in cycles/µm (DESIGN.md §3: the relay inverts the BFP)."""
+        """u_k = -a / (λ f_obj m_r) in cycles/µm (docs/conventions.md: the relay inverts the BFP)."""
         return -np.asarray(a_um, dtype=float) / (self.wavelength_um * self.f_obj_um * self.m_r)
 
     def lenslets(self, axis_offset_um=(0.0, 0.0), min_fraction: float = 1e-3) -> list[Lenslet]:
@@ -432,135 +403,6 @@ class Optics:
         """tan of the propagation angle in the medium for frequency |u| (cycles/µm)."""
         s = np.clip(self.wavelength_um * np.linalg.norm(np.atleast_2d(u), axis=-1) / self.medium_index, 0, 0.999999)
         return s / np.sqrt(1 - s * s)
-
-    # ------------------------------------------------------ design calculator
-    def design(self) -> dict:
-        """Paper Eqs. 8-14 and the DOF limits of section 3.2 (lengths in µm)."""
-        lam, M, NA = self.wavelength_um, self.magnification, self.na
-        f_fl, f_ml = self.fourier_lens_mm * 1e3, self.mla_focal_length_mm * 1e3
-        f_tube, f_obj, d = self.tube_lens_mm * 1e3, self.f_obj_um, self.pitch_um
-        na_ml = self.lenslet_radius_um / f_ml
-        r_nip = lam / (2 * na_ml)  # Eq. 11
-        r_xy = r_nip * (f_fl / f_ml) / M  # Eq. 12
-        tan_printed = math.sqrt(2) * d / f_ml  # Eq. 13 as printed
-        tan_ffl = math.sqrt(2) * d / f_fl  # reproduces the printed 20.6 µm
-        rz_printed = r_nip * (f_fl / f_ml) / tan_printed / M**2
-        rz_ffl = r_nip * (f_fl / f_ml) / tan_ffl / M**2
-        m_t = (2 * f_fl * NA / f_tube) * (f_obj / d)
-        dof_fwhm = m_t**2 * lam / NA**2 + self.pixel_um * m_t**2 / (M * NA)  # Eq. 14
-        dof_pitch = d * (f_fl / f_ml) / (d / f_fl) / M**2
-        lens = self.lenslets()
-        usable = [ln for ln in lens if ln.fraction >= 0.5]
-        tan_edge = float(np.max(self.tan_theta(np.array([ln.u for ln in lens]))))
-        regimes = [self.illumination_regime(ln) for ln in lens]
-        return {
-            "ei_radius_um": self.ei_radius_um,  # Eq. 8
-            "iris_radius_um": self.iris_radius_nip_um,  # Eq. 9
-            "fov_um": self.fov_um,  # Eq. 10
-            "r_nip_um": r_nip,  # Eq. 11
-            "r_xy_um": r_xy,  # Eq. 12
-            "r_z_printed_um": rz_printed,
-            "r_z_ffl_um": rz_ffl,
-            "m_t": m_t,
-            "dof_fwhm_um": dof_fwhm,
-            "dof_full_um": 2 * dof_fwhm,
-            "dof_pitch_um": dof_pitch,
-            "dof_um": min(2 * dof_fwhm, dof_pitch),
-            "m_ei": self.m_ei,
-            "object_pixel_um": self.object_pixel_um,
-            "f_obj_um": f_obj,
-            "m_r": self.m_r,
-            "subaperture_na": self.subaperture_na,
-            "sigma": self.sigma,
-            "pitch_px": self.pitch_px,
-            "ei_radius_px": self.ei_radius_px,
-            "lenslets_in_pupil": len(lens),
-            "lenslets_usable": len(usable),
-            "nyquist_voxel_xy_um": r_xy / 2,
-            "nyquist_voxel_z_um": rz_ffl / 2,
-            "max_tan_theta": tan_edge,
-            "lenslets_brightfield": regimes.count("brightfield"),
-            "lenslets_straddling": regimes.count("straddling"),
-            "lenslets_darkfield": regimes.count("darkfield"),
-        }
-
-    def illumination_regime(self, lenslet: Lenslet) -> str:
-        """Where a lenslet's sub-aperture lies relative to the source disk (DESIGN.md §4.2):
-        'brightfield' (wholly inside: defocus contrast only), 'straddling' (DPC-like
-        contrast) or 'darkfield' (wholly outside: second order in the weak-object model)."""
-        na_k = self.wavelength_um * math.hypot(*lenslet.u)
-        if na_k + self.subaperture_na <= self.condenser_na:
-            return "brightfield"
-        if na_k - self.subaperture_na >= self.condenser_na:
-            return "darkfield"
-        return "straddling"
-
-
-def design_table(optics: Optics) -> str:
-    """Readable design summary for ``ssdpc design``."""
-    d = optics.design()
-    rows = [
-        ("Elemental-image magnification M_EI", f"{d['m_ei']:.4g}", "x"),
-        ("Object pixel size", f"{d['object_pixel_um']:.4f}", "µm"),
-        ("Lenslet pitch on sensor", f"{d['pitch_px']:.2f}", "px"),
-        ("EI radius R_EI (Eq. 8)", f"{d['ei_radius_um']:.1f} µm = {d['ei_radius_px']:.2f}", "px"),
-        ("Iris radius at NIP (Eq. 9)", f"{d['iris_radius_um']:.1f}", "µm"),
-        ("Field of view D_FOV (Eq. 10)", f"{d['fov_um']:.2f}", "µm"),
-        ("Sub-aperture NA (object side)", f"{d['subaperture_na']:.4f}", ""),
-        ("Coherence ratio sigma = NA_c / NA", f"{d['sigma']:.3f}", ""),
-        ("Lateral resolution R_xy (Eq. 12)", f"{d['r_xy_um']:.2f}", "µm"),
-        ("Axial resolution R_z, Eq. 13 as printed (tan = sqrt2 d/f_ml)", f"{d['r_z_printed_um']:.2f}", "µm"),
-        (
-            "Axial resolution R_z with tan = sqrt2 d/f_fl (matches paper's 20.6, measured 21.96)",
-            f"{d['r_z_ffl_um']:.2f}",
-            "µm",
-        ),
-        ("DOF, FWHM of central-lenslet PSF (Eq. 14)", f"{d['dof_fwhm_um']:.2f}", "µm"),
-        ("DOF, full width (2 x FWHM)", f"{d['dof_full_um']:.2f}", "µm"),
-        ("DOF, pitch-limited", f"{d['dof_pitch_um']:.1f}", "µm"),
-        ("DOF, usable (smaller of the two)", f"{d['dof_um']:.2f}", "µm"),
-        ("Lenslets overlapping the pupil", f"{d['lenslets_in_pupil']}", ""),
-        ("Usable lenslets (>= 50% inside the pupil)", f"{d['lenslets_usable']}", ""),
-        (
-            "Lenslets inside / straddling / outside the source disk",
-            f"{d['lenslets_brightfield']} / {d['lenslets_straddling']} / {d['lenslets_darkfield']}",
-            "",
-        ),
-        ("Nyquist voxel, lateral (R_xy / 2)", f"{d['nyquist_voxel_xy_um']:.2f}", "µm"),
-        ("Nyquist voxel, axial (R_z / 2)", f"{d['nyquist_voxel_z_um']:.2f}", "µm"),
-    ]
-    w = max(len(r[0]) for r in rows)
-    lines = [f"{n:<{w}}  {v} {u}".rstrip() for n, v, u in rows]
-    lines.append("Note: the paper's measured axial resolution (21.96 µm) matches the f_fl variant of R_z.")
-    return "\n".join(lines)
-
-
-def _num(d, key, source, prefix="", allow_zero=False):
-    v = d[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        if isinstance(v, str):
-            try:
-                return float(v)
-            except ValueError:
-                pass
-        raise SsdpcError(f"{source}: '{prefix}{key}' must be a number, got {v!r} (the unit is in the key name)")
-    v = float(v)
-    if not math.isfinite(v):
-        raise SsdpcError(f"{source}: '{prefix}{key}' must be finite, got {v}")
-    if v < 0 or (v == 0 and not allow_zero):
-        raise SsdpcError(f"{source}: '{prefix}{key}' must be positive, got {v}")
-    return v
-
-
-def _unit_hint(key, candidates, unknown=False):
-    """Point at a key that differs only in its unit suffix (e.g. pitch_mm vs pitch_um)."""
-    stem = key.rsplit("_", 1)[0]
-    for c in candidates:
-        if c != key and c.rsplit("_", 1)[0] == stem:
-            if unknown:
-                return f" (expected '{c}': lengths carry their unit in the key)"
-            return f" (found '{c}' instead: convert the value and rename the key to '{key}')"
-    return " (not part of the optics schema)" if unknown else ""
 
 
 PAPER_OPTICS = {

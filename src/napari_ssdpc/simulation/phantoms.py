@@ -10,7 +10,7 @@ partial-volume (anti-aliased) voxelisers used by the simulator and by tests:
   pixels of side ``pixel_um`` centred on the 1D coordinates ``y``, ``x``;
 - ``volume(z, y, x)``: the voxel average of Δn on a regular (z, y, x) grid.
 
-Positions are (x, y, z) in µm; z > 0 is farther from the objective (DESIGN.md §3).
+Positions are (x, y, z) in µm; z > 0 is farther from the objective (docs/conventions.md).
 
 The medium: ``medium_index=None`` means "the medium of the optics" (the simulator
 fills it in and returns the bound phantom as ``Simulation.phantom``). A phantom with a

@@ -17,7 +17,7 @@ It is deliberately more complete than the reconstruction model (no inverse crime
    z = 0, low-passed by the objective pupil, and cut by the iris, a field stop of radius
    ``optics.field_radius_um`` in the native image plane (object units).
 4. Each lenslet k passes the sub-aperture A_k = P_obj · circ(|u − u_k| ≤ ρ)
-   (u_k = −a/(λ f_obj m_r), DESIGN.md §3). Its spectrum is cropped around u_k and
+   (u_k = −a/(λ f_obj m_r), docs/conventions.md). Its spectrum is cropped around u_k and
    inverse-transformed on a small grid (its intensity is band-limited to 2ρ), |.|² is
    summed over the source points.
 5. The band-limited EI intensity is resampled exactly (Fourier series) onto the
@@ -623,7 +623,7 @@ def effective_tan_theta(optics: Optics, lenslet, supersample: int = 400) -> np.n
     """|pupil|²-weighted mean over A_k of tanθ(u)·û(u) (vector, object frame).
 
     A point at depth z appears displaced by z times this vector in the EI of
-    ``lenslet`` (DESIGN.md §3); it is about 6 % below the centre value for clipped EIs."""
+    ``lenslet`` (docs/conventions.md); it is about 6 % below the centre value for clipped EIs."""
     rho, cut = optics.subaperture_radius, optics.cutoff
     t = np.linspace(-rho, rho, supersample)
     ux, uy = np.meshgrid(lenslet.u[0] + t, lenslet.u[1] + t)

@@ -1,0 +1,38 @@
+"""Saturated pixels: the fraction at the top of the camera's range, and a warning above a threshold."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from napari_ssdpc.errors import SsdpcWarning
+
+__all__ = ["saturated_fraction", "warn_saturation"]
+
+
+def saturated_fraction(frame, level=None) -> float:
+    """Fraction of pixels at the top of the range: ``level``, else the full scale of an
+    integer frame (2**b − 1 for a b-bit camera in a 16-bit container, b in 8..16)."""
+    a = np.asarray(frame)
+    top = level
+    if top is None:
+        if a.dtype.kind not in "ui" or a.size == 0:
+            return 0.0
+        m = int(a.max())
+        if m + 1 not in {2**b for b in range(8, 17)}:
+            return 0.0
+        top = m
+    return float(np.mean(a >= top))
+
+
+def warn_saturation(frame, name="frame", level=None, threshold=1e-4) -> float:
+    """Warn (SsdpcWarning) with the saturated fraction when it exceeds ``threshold``."""
+    frac = saturated_fraction(frame, level)
+    if frac > threshold:
+        warnings.warn(
+            f"{name}: {100 * frac:.3f}% of pixels are saturated; shorten the exposure or lower the illumination",
+            SsdpcWarning,
+            stacklevel=3,
+        )
+    return frac

@@ -1,0 +1,170 @@
+"""The registry of output quantities: one table that every writer, reader and widget uses.
+
+A quantity has a name (the key of ``--save``, of the OME-Zarr image group and of the file
+suffix), a unit, a description, a colormap and contrast rule for display, its kind (a (z, y, x)
+volume, a (y, x) map, or channels of volumes) and how to take it from a
+:class:`~napari_ssdpc.reconstruction.pipeline.Result`. A new quantity is added here, once.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.settings.optics import HALVES, PAIRS
+
+__all__ = ["QUANTITIES", "SAVE_CHOICES", "Quantity", "images", "layout", "parse_save"]
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """One output quantity.
+
+    Attributes
+    ----------
+    name : str
+        Key ('ri', 'phase', ...): ``--save`` value, OME-Zarr group, file suffix ``OUT_<name>``.
+    label : str
+        Short display name (napari layer names).
+    unit : str
+        Physical unit of the values ('' for a dimensionless index or ratio).
+    description : str
+        One line for metadata and help.
+    colormap : str
+        napari/matplotlib colormap.
+    centred : bool
+        Display limits symmetric about the medium index (RI) or zero.
+    kind : {'volume', 'map', 'channels'}
+        (z, y, x), (y, x) or (c, z, y, x) per frame.
+    channels : tuple of str
+        Channel names of a 'channels' quantity.
+    needs_stacks : bool
+        Computed from the Richardson-Lucy stacks (the slower path).
+    """
+
+    name: str
+    label: str
+    unit: str
+    description: str
+    colormap: str
+    centred: bool
+    kind: Literal["volume", "map", "channels"]
+    get: Callable[[Any], Any]
+    channels: tuple[str, ...] = ()
+    needs_stacks: bool = False
+
+    @property
+    def axes(self) -> str:
+        """OME axes of one frame: 'ZYX', 'YX' or 'CZYX'."""
+        return {"volume": "ZYX", "map": "YX", "channels": "CZYX"}[self.kind]
+
+    def of(self, result: Any) -> np.ndarray | None:
+        """This quantity of a Result, or None when the result does not hold it."""
+        value = self.get(result)
+        if self.kind == "channels":
+            if not value:
+                return None
+            return np.stack([value[c] for c in self.channels])
+        return None if value is None else np.asarray(value)
+
+    def file_suffix(self) -> str:
+        """'' for the main output (RI), else '_<name>'."""
+        return "" if self.name == "ri" else f"_{self.name}"
+
+
+QUANTITIES: dict[str, Quantity] = {
+    q.name: q
+    for q in (
+        Quantity("ri", "RI", "", "refractive index", "RdBu_r", True, "volume", lambda r: r.ri),
+        Quantity(
+            "delta_n",
+            "Δn",
+            "",
+            "refractive-index difference to the medium",
+            "RdBu_r",
+            True,
+            "volume",
+            lambda r: r.delta_n,
+        ),
+        Quantity("phase", "phase", "rad", "phase per slab, rad", "RdBu_r", True, "volume", lambda r: r.phase),
+        Quantity(
+            "absorption",
+            "absorption",
+            "",
+            "absorption mu per slab",
+            "gray",
+            True,
+            "volume",
+            lambda r: r.absorption,
+            needs_stacks=True,
+        ),
+        Quantity(
+            "dpc",
+            "DPC",
+            "",
+            "DPC up-down, left-right (paper Eq. 1)",
+            "gray",
+            True,
+            "channels",
+            lambda r: r.dpc,
+            channels=tuple(PAIRS),
+            needs_stacks=True,
+        ),
+        Quantity(
+            "stacks",
+            "stack",
+            "",
+            "RL intensity stacks up, down, left, right",
+            "gray",
+            False,
+            "channels",
+            lambda r: r.stacks,
+            channels=HALVES,
+            needs_stacks=True,
+        ),
+    )
+}
+#: What ``--save`` may add to the RI volume, in a fixed order.
+SAVE_CHOICES = tuple(n for n in QUANTITIES if n != "ri")
+
+
+def parse_save(text: str | Iterable[str] | None) -> list[str]:
+    """The quantities asked for ('phase,dpc' or a list), checked against the registry.
+
+    Returns
+    -------
+    list of str
+        Names in registry order, without 'ri' (always written).
+    """
+    names = [s.strip() for s in text.split(",")] if isinstance(text, str) else list(text or [])
+    names = [s for s in names if s]
+    bad = [s for s in names if s not in SAVE_CHOICES]
+    if bad:
+        raise SsdpcError(f"--save {','.join(bad)}: unknown output; choose from {','.join(SAVE_CHOICES)}")
+    return [n for n in SAVE_CHOICES if n in names]
+
+
+def images(result: Any, save: Iterable[str]) -> dict[str, tuple[np.ndarray, str, str]]:
+    """{name: (array, axes, description)}: RI and the requested quantities of one frame."""
+    out = {}
+    for name in ["ri", *parse_save(list(save))]:
+        q = QUANTITIES[name]
+        data = q.of(result)
+        if data is None:
+            raise SsdpcError(f"the result holds no {name}: reconstruct with RL stacks (save dpc, stacks or absorption)")
+        out[name] = (data, q.axes, q.description)
+    return out
+
+
+def layout(n_z: int, shape_yx: tuple[int, int], save: Iterable[str]) -> dict[str, tuple[tuple, str, str]]:
+    """{name: (shape per frame, axes, description)} without reconstructing anything."""
+    out = {}
+    for name in ["ri", *parse_save(list(save))]:
+        q = QUANTITIES[name]
+        shape = {"volume": (n_z, *shape_yx), "map": tuple(shape_yx), "channels": (len(q.channels), n_z, *shape_yx)}
+        out[name] = (shape[q.kind], q.axes, q.description)
+    return out

@@ -1,0 +1,53 @@
+"""The layout keeps its promises: dependencies point one way, only _napari imports the GUI."""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PKG = Path(__file__).resolve().parents[1] / "src" / "napari_ssdpc"
+GUI = ("napari", "magicgui", "qtpy", "PyQt5", "PyQt6", "PySide2", "PySide6", "superqt", "vispy")
+#: layer -> layers it must not import
+FORBIDDEN = {
+    "settings": ("physics", "calibration", "reconstruction", "simulation", "io", "cli", "_napari", "validation"),
+    "physics": ("calibration", "reconstruction", "simulation", "io", "cli", "_napari", "validation"),
+    "calibration": ("reconstruction", "simulation", "io", "cli", "_napari", "validation"),
+    "reconstruction": ("simulation", "io", "cli", "_napari", "validation"),
+    "simulation": ("reconstruction", "io", "cli", "_napari", "validation"),
+    "io": ("cli", "_napari", "validation"),
+}
+
+
+def _imports(path: Path) -> set[str]:
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names.add(node.module)
+    return names
+
+
+MODULES = sorted(p for p in PKG.rglob("*.py"))
+
+
+@pytest.mark.parametrize("path", MODULES, ids=lambda p: str(p.relative_to(PKG)))
+def test_layers_point_one_way_and_gui_stays_in_napari(path):
+    rel = path.relative_to(PKG)
+    layer = rel.parts[0] if len(rel.parts) > 1 else None
+    imported = _imports(path)
+    if layer != "_napari":
+        gui = sorted(m for m in imported if m.split(".")[0] in GUI)
+        assert not gui, f"{rel} imports {gui}: GUI code belongs in _napari/"
+    for bad in FORBIDDEN.get(layer, ()):
+        upward = sorted(m for m in imported if m.startswith(f"napari_ssdpc.{bad}"))
+        assert not upward, f"{rel} ({layer}) imports {upward}: dependencies point one way"
+
+
+def test_nothing_cites_files_outside_the_repository():
+    root = PKG.parents[1]
+    words = ("DESIGN.md", "shared/paper", "STYLE.md", "../shared")
+    for path in [*root.joinpath("src").rglob("*.py"), *root.joinpath("docs").rglob("*.md"), root / "README.md"]:
+        text = path.read_text(encoding="utf-8")
+        found = [w for w in words if w in text]
+        assert not found, f"{path.relative_to(root)} cites {found}"
