@@ -6,7 +6,7 @@ import pytest
 import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcWarning
-from napari_ssdpc.physics.psf import axial_frequency
+from napari_ssdpc.physics.pupil import axial_frequency
 from napari_ssdpc.physics.transfer import (
     dpc_from_halves,
     dpc_transfer_functions,

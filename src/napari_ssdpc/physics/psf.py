@@ -43,46 +43,8 @@ import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.lattice import Grid
+from napari_ssdpc.physics.pupil import axial_frequency, mean_tilt, soft_disk, subaperture_pupil
 from napari_ssdpc.settings.optics import Lenslet, Optics
-
-
-# ------------------------------------------------------------------ pupil helpers
-def soft_disk(dist, radius, step):
-    """Disk sampled with an antialiased edge: a linear ramp one sample wide, so that the sampled
-    amplitude integrates to the disk area to second order in the step."""
-    return np.clip(0.5 + (radius - np.asarray(dist)) / step, 0.0, 1.0)
-
-
-def axial_frequency(ux, uy, optics: Optics):
-    """η(u) = sqrt((n/λ)² − |u|²) in cycles/µm (0 for evanescent waves)."""
-    k2 = (optics.medium_index / optics.wavelength_um) ** 2
-    return np.sqrt(np.maximum(k2 - ux * ux - uy * uy, 0.0))
-
-
-def subaperture_pupil(optics: Optics, u_k, shape, du):
-    """P_k = P_obj·circ(|u − u_k| ≤ ρ) on the grid u = u_k + fftfreq (unshifted FFT order).
-
-    Returns (P, ux, uy) with ux, uy the absolute frequencies (broadcastable to ``shape``).
-    """
-    ny, nx = shape
-    duy, dux = (du, du) if np.isscalar(du) else du
-    fy = sfft.fftfreq(ny, 1.0 / (ny * duy))[:, None]
-    fx = sfft.fftfreq(nx, 1.0 / (nx * dux))[None, :]
-    ux, uy = u_k[0] + fx, u_k[1] + fy
-    step = math.sqrt(dux * duy)
-    p = soft_disk(np.hypot(fx, fy), optics.subaperture_radius, step)
-    p = p * soft_disk(np.hypot(ux, uy), optics.cutoff, step)
-    return p, ux, uy
-
-
-def mean_tilt(optics: Optics, pupil, ux, uy) -> np.ndarray:
-    """<u/η(u)> weighted by |P|² (x, y): a point at depth z is displaced by z times this."""
-    w = np.abs(pupil) ** 2
-    eta = axial_frequency(ux, uy, optics)
-    total = w.sum()
-    if total <= 0:
-        raise SsdpcError("a lenslet sub-aperture lies outside the objective pupil; drop it from the lenslet list")
-    return np.array([np.sum(w * ux / eta), np.sum(w * uy / eta)]) / total
 
 
 def _boxed_pupil(optics: Optics, u_k, shape, du):
@@ -284,7 +246,7 @@ class LensletPSF:
         self._pupil = np.stack(pupils).astype(np.float32)
         # parallax ramps act on the offsets from u_k; the defocus is exp(i2π z [η − η(u_k)])
         self._f = (np.arange(-m, m + 1) * du).astype(np.float32)
-        eta_k = np.array([axial_frequency(*ln.u, optics) for ln in self.lenslets])[:, None, None]
+        eta_k = np.array([axial_frequency(ln.u[0], ln.u[1], optics) for ln in self.lenslets])[:, None, None]
         self._deta = (axial_frequency(np.stack(ux), np.stack(uy), optics) - eta_k).astype(np.float32)
         # the soft pupil edge is a cell average: it multiplies the amplitude by sinc(x du) sinc(y du)
         f = sfft.fftfreq(self._n)

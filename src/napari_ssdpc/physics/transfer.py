@@ -35,7 +35,7 @@ import numpy as np
 import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
-from napari_ssdpc.physics.psf import axial_frequency, soft_disk, subaperture_pupil
+from napari_ssdpc.physics.pupil import axial_frequency, soft_disk, subaperture_pupil
 from napari_ssdpc.settings.optics import Lenslet, Optics
 
 HALVES = ("up", "down", "left", "right")

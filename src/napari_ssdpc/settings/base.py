@@ -144,13 +144,12 @@ def one_line(error: ValidationError, model: type[BaseModel], source: str) -> str
     elif kind == "finite_number":
         msg = f"'{key}' must be a finite number, got {value!r}"
     elif kind in ("greater_than_equal", "less_than_equal", "greater_than", "less_than"):
-        lo, hi = field_range(sub, str(loc[-1])) if sub is not None and loc else (None, None)
+        lo, hi = field_range(sub, str(loc[-1])) if sub is not None and loc else (-math.inf, math.inf)
         desc = sub.model_fields[str(loc[-1])].description if sub is not None and loc else ""
-        if lo is not None and lo >= 0 and isinstance(value, (int, float)) and value <= 0 < hi:
+        if lo >= 0 and isinstance(value, (int, float)) and value <= 0 < hi:
             msg = f"'{key}' must be positive, got {value!r} ({desc})"
         else:
-            span = f"{lo:g} to {hi:g}" if lo is not None and math.isfinite(hi or math.inf) else f">= {lo:g}"
-            msg = f"'{key}' = {value!r} is outside {span}; check the unit ({desc})"
+            msg = f"'{key}' = {value!r} is outside {lo:g} to {hi:g}; check the unit ({desc})"
     elif kind == "literal_error":
         msg = f"'{key}' must be {first['ctx']['expected']}, got {value!r}"
     elif kind == "value_error":

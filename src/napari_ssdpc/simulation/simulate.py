@@ -41,6 +41,7 @@ from scipy import ndimage, special
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.lattice import Grid
+from napari_ssdpc.physics.pupil import eta
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation.camera import Camera
 from napari_ssdpc.simulation.phantoms import (
@@ -201,11 +202,6 @@ def _disk_fraction(x, y, radius, pixel, supersample=8):
 
 
 # ----------------------------------------------------------------------- propagation
-def eta(u2, n_medium: float, wavelength_um: float) -> np.ndarray:
-    """η(u) = sqrt((n/λ)² − |u|²), imaginary (evanescent) beyond n/λ."""
-    return np.sqrt(((n_medium / wavelength_um) ** 2 - np.asarray(u2, dtype=np.float64)).astype(np.complex128))
-
-
 def propagate(field, d_um: float, dx_um: float, wavelength_um: float, n_medium: float, tilt=(0.0, 0.0)):
     """Angular-spectrum propagation of a 2D field (y, x) over ``d_um`` forward
     (toward the objective) in a medium: spectrum x exp(+i2π d [η(u + w) − η(w)]);
