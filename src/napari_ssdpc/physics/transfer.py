@@ -36,10 +36,8 @@ import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.physics.pupil import axial_frequency, soft_disk, subaperture_pupil
-from napari_ssdpc.settings.optics import Lenslet, Optics
+from napari_ssdpc.settings.optics import HALVES, PAIRS, Lenslet, Optics
 
-HALVES = ("up", "down", "left", "right")
-AXES = {"ud": ("up", "down"), "lr": ("left", "right")}
 #: In-focus peak |H_DPC| below which the phase is too weak to invert (see docs/operators.md).
 WEAK_CONTRAST = 0.1
 
@@ -253,7 +251,7 @@ def dpc_transfer_functions(
         focus = out["H_phase"] if _in_focus(zs) else _half_sums(setup, members, np.asarray(0.0))[1]
         out["cases"] = [lenslet_case(optics, ln) for ln in setup.lenslets]
     out["dpc_phase"], out["dpc_abs"], out["dpc_offset"], out["contrast"] = {}, {}, {}, {}
-    for axis, (h1, h2) in AXES.items():
+    for axis, (h1, h2) in PAIRS.items():
         a1, a2 = out["I0"][h1], out["I0"][h2]
         if not a1 + a2 > 0:
             raise SsdpcError(

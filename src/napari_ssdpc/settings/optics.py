@@ -83,8 +83,20 @@ class Lenslet:
 
 
 def circle_overlap_fraction(d, r_small, r_big):
-    """Fraction of a circle of radius ``r_small`` inside a circle of radius ``r_big``
-    whose centres are ``d`` apart (exact lens-area formula, vectorised)."""
+    """Fraction of a circle of radius ``r_small`` inside a circle of radius ``r_big``.
+
+    Parameters
+    ----------
+    d : array_like
+        Distance between the centres (any length unit, the same for all three).
+    r_small, r_big : float
+        The two radii.
+
+    Returns
+    -------
+    ndarray, float64, shape of ``d``
+        Area fraction of the small circle inside the big one (exact lens-area formula).
+    """
     d = np.abs(np.asarray(d, dtype=float))
     r, R = float(r_small), float(r_big)
     out = np.zeros_like(d)
@@ -256,47 +268,58 @@ class Optics(SettingsModel):
     # ----------------------------------------------------- flat part attributes
     @property
     def magnification(self) -> float:
+        """objective.magnification (x)"""
         return self.objective.magnification
 
     @property
     def na(self) -> float:
+        """objective.na"""
         return self.objective.na
 
     @property
     def tube_lens_mm(self) -> float:
+        """objective.tube_lens_mm (mm)"""
         return self.objective.tube_lens_mm
 
     @property
     def pitch_um(self) -> float:
+        """mla.pitch_um (µm)"""
         return self.mla.pitch_um
 
     @property
     def mla_focal_length_mm(self) -> float:
+        """mla.focal_length_mm (mm)"""
         return self.mla.focal_length_mm
 
     @property
     def lenslet_radius_um(self) -> float:
+        """mla.lenslet_radius_um (µm)"""
         return self.mla.lenslet_radius_um
 
     @property
     def grid(self) -> str:
+        """mla.grid ('square' or 'hex')"""
         return self.mla.grid
 
     @property
     def pixel_um(self) -> float:
+        """sensor.pixel_um (µm)"""
         return self.sensor.pixel_um
 
     @property
     def width_px(self) -> int:
+        """sensor.width_px"""
         return self.sensor.width_px
 
     @property
     def height_px(self) -> int:
+        """sensor.height_px"""
         return self.sensor.height_px
 
     # ------------------------------------------------------- derived quantities
     @property
     def f_obj_um(self) -> float:
+        """Objective focal length f_tube / M, µm."""
         return self.tube_lens_mm * 1000.0 / self.magnification
 
     @property
@@ -311,10 +334,12 @@ class Optics(SettingsModel):
 
     @property
     def object_pixel_um(self) -> float:
+        """Sensor pixel in object space, pixel / M_EI, µm."""
         return self.pixel_um / self.m_ei
 
     @property
     def pitch_px(self) -> float:
+        """Lenslet pitch on the sensor, px."""
         return self.pitch_um / self.pixel_um
 
     @property
@@ -331,6 +356,7 @@ class Optics(SettingsModel):
 
     @property
     def ei_radius_px(self) -> float:
+        """EI radius on the sensor, px."""
         return self.ei_radius_um / self.pixel_um
 
     @property
@@ -340,6 +366,7 @@ class Optics(SettingsModel):
 
     @property
     def field_radius_um(self) -> float:
+        """Radius of the field of view in object space, µm."""
         return 0.5 * self.fov_um
 
     @property
@@ -373,15 +400,34 @@ class Optics(SettingsModel):
         return self.condenser_na / self.wavelength_um
 
     def mla_to_frequency(self, a_um):
-        """u_k = -a / (λ f_obj m_r) in cycles/µm (docs/conventions.md: the relay inverts the BFP)."""
+        """Sub-aperture centre frequency of a lenslet at MLA position ``a``.
+
+        Parameters
+        ----------
+        a_um : array_like, (..., 2)
+            (x, y) position on the MLA from the optical axis, µm.
+
+        Returns
+        -------
+        ndarray, (..., 2)
+            u_k = -a / (λ f_obj m_r), cycles/µm (docs/conventions.md: the relay inverts the BFP).
+        """
         return -np.asarray(a_um, dtype=float) / (self.wavelength_um * self.f_obj_um * self.m_r)
 
     def lenslets(self, axis_offset_um=(0.0, 0.0), min_fraction: float = 1e-3) -> list[Lenslet]:
         """Lenslets overlapping the objective pupil.
 
-        ``axis_offset_um`` is the optical axis position relative to the reference
-        lattice vertex in the MLA plane (x, y), so a lenslet centre relative to the
-        axis is its lattice position minus that offset.
+        Parameters
+        ----------
+        axis_offset_um : (float, float)
+            Optical axis position relative to the reference lattice vertex in the MLA plane
+            (x, y), µm: a lenslet centre relative to the axis is its lattice position minus it.
+        min_fraction : float
+            Smallest part of a lenslet inside the pupil that still counts.
+
+        Returns
+        -------
+        list of Lenslet
         """
         p = self.pitch_um
         ox, oy = (float(v) for v in axis_offset_um)
@@ -400,7 +446,17 @@ class Optics(SettingsModel):
         return out
 
     def tan_theta(self, u) -> np.ndarray:
-        """tan of the propagation angle in the medium for frequency |u| (cycles/µm)."""
+        """tanθ of the propagation angle in the medium, sinθ = λ|u|/n.
+
+        Parameters
+        ----------
+        u : array_like, (2,) or (N, 2)
+            Lateral spatial frequency, cycles/µm.
+
+        Returns
+        -------
+        ndarray, (N,)
+        """
         s = np.clip(self.wavelength_um * np.linalg.norm(np.atleast_2d(u), axis=-1) / self.medium_index, 0, 0.999999)
         return s / np.sqrt(1 - s * s)
 

@@ -26,6 +26,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.settings.optics import Optics
 
 
 # ----------------------------------------------------------------------------- primitives
@@ -372,3 +373,22 @@ def moving_sample(
         c = s + f * (e - s)
         out.append(Cell(center_um=tuple(float(v) for v in c), angle_deg=float(f * turn_deg), **base))
     return out
+
+
+def optics_for(phantom: Phantom | list | None, optics: Optics) -> Optics:
+    """The optics with the phantom's own medium, when it declares one (the one place that rule lives).
+
+    Parameters
+    ----------
+    phantom : Phantom, list of Phantom (a time series: the first decides) or None
+    optics : Optics
+
+    Returns
+    -------
+    Optics
+        ``optics`` itself, or a copy with ``medium_index`` set to the phantom's.
+    """
+    first = phantom[0] if isinstance(phantom, list) else phantom
+    if first is not None and first.medium_index is not None and first.medium_index != optics.medium_index:
+        return optics.replace(medium_index=float(first.medium_index))
+    return optics

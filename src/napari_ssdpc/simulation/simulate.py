@@ -56,6 +56,7 @@ from napari_ssdpc.simulation.phantoms import (
     bar_target,
     cell,
     moving_sample,
+    optics_for,
     pmma_bead,
     two_beads,
 )
@@ -299,17 +300,11 @@ def exit_field(
 
     Returns (V on the full grid in FFT order, z_exit µm, sampling). Useful for checks."""
     phantom = phantom.with_medium(optics.medium_index)
-    optics = _optics_for(phantom, optics)
+    optics = optics_for(phantom, optics)
     sampling = sampling or Sampling.for_optics(optics)
     slabs = _Slabs(phantom, optics, sampling, dz_um)
     v = slabs.embed(slabs.exit_envelope(np.asarray(tilt, float)), sampling.n)
     return v, slabs.z_exit, sampling
-
-
-def _optics_for(phantom, optics):
-    if phantom is not None and phantom.medium_index is not None and phantom.medium_index != optics.medium_index:
-        return optics.replace(medium_index=float(phantom.medium_index))
-    return optics
 
 
 # ----------------------------------------------------------------------- lenslet optics
@@ -572,7 +567,7 @@ def simulate(
     own ``medium_index`` (e.g. ``cell()``, water) replaces the optics' medium; the
     optics used is returned as ``Simulation.optics``."""
     t0 = time.perf_counter()
-    optics = _optics_for(phantom, optics)
+    optics = optics_for(phantom, optics)
     if phantom is not None:
         phantom = phantom.with_medium(optics.medium_index)
     grid, camera, lenslets = _setup(optics, grid, camera)
