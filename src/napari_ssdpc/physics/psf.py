@@ -101,11 +101,28 @@ def reference_psf(
 ) -> ReferencePSF:
     """PSF of the whole instrument by paper Eq. 6, for every depth in ``z_um``.
 
-    ``grid_or_lenslets``: a ``Grid`` (axis position on the sensor; unrotated and unmirrored), a
-    list of ``Lenslet`` (axis on a pixel centre of the region), or None (nominal lattice). The
-    region covers the objective pupil on the MLA plus ``margin_um`` (default half a pitch).
-    ``oversample`` (odd) samples each pixel q×q times; the pixel integration is an exact box
-    filter in the Fourier domain (sinc), so q = 1 already converges for the paper's optics.
+    Parameters
+    ----------
+    optics : Optics
+    grid_or_lenslets : Grid, list of Lenslet or None
+        A ``Grid`` (axis position on the sensor; unrotated and unmirrored), a list of ``Lenslet``
+        (axis on a pixel centre of the region), or None (nominal lattice).
+    z_um : float or sequence of float
+        Depths of the point, µm.
+    oversample : int
+        Odd; samples each pixel q×q times. The pixel integration is an exact box filter in the
+        Fourier domain (sinc), so q = 1 already converges for the paper's optics.
+    margin_um : float, optional
+        Region beyond the objective pupil on the MLA, µm (default half a pitch).
+    pixel_integration : bool
+        Integrate over each camera pixel.
+    progress : callable, optional
+        ``progress(done, total)`` after each depth.
+
+    Returns
+    -------
+    ReferencePSF
+        Sensor images (Z, rows, cols), energy per pixel as a fraction of one unclipped lenslet's light.
     """
     q = int(oversample)
     if q < 1 or q % 2 == 0:
@@ -196,10 +213,30 @@ def _angular_spectrum(optics: Optics, n, dx):
 class LensletPSF:
     """Per-lenslet EI kernels on the object-space EI grid, factorised as blur x parallax ramp.
 
-    ``shape``: EI window (h, w), default the EI diameter (145 px for the paper's optics); kernel
-    pixel (i, j) samples the object offset ((j − w//2) + off_x, (i − h//2) + off_y)·pixel_um from
-    the EI centre, with ``offsets_px`` (K, 2) (default 0). Blurs are computed per depth on first
-    use and cached (``precompute`` fills the cache with a progress callback).
+    Parameters
+    ----------
+    optics : Optics
+    lenslets : list of Lenslet, optional
+        Default: every lenslet in the pupil.
+    shape : (int, int), optional
+        EI window (h, w), default the EI diameter (145 px for the paper's optics). Kernel pixel
+        (i, j) samples the object offset ((j − w//2) + off_x, (i − h//2) + off_y)·pixel_um from
+        the EI centre.
+    pixel_um : float, optional
+        Object pixel, µm (default the optics').
+    offsets_px : ndarray, (K, 2), optional
+        Sub-pixel offsets of each EI grid (x, y), px (default 0).
+    support_px : int, optional
+        Side of the stored blur, px (default: defocus blur at ``z_max_um`` plus 8 Airy radii).
+    z_max_um : float, optional
+        Largest |z| the kernels serve, µm (default 80).
+    pixel_integration : bool
+        Integrate over each camera pixel.
+
+    Notes
+    -----
+    Blurs are computed per depth on first use and cached (``precompute`` fills the cache with a
+    progress callback).
     """
 
     def __init__(
@@ -290,6 +327,7 @@ class LensletPSF:
                 progress(i + 1, len(zs))
 
     def clear_cache(self) -> None:
+        """Drop the cached blurs (they can take hundreds of MB)."""
         self._cache.clear()
 
     def _compute_blur(self, z: float) -> np.ndarray:

@@ -44,14 +44,28 @@ WEAK_CONTRAST = 0.1
 
 # ------------------------------------------------------------ general (S, P)
 def weak_object_transfer_functions(source, pupil, z_um=0.0, eta=None, out_shape=None, norm=None):
-    """(H_abs, H_phase) of a source S(w) and pupil P(w) by FFT correlation.
+    """(H_abs, H_phase) of a source S(w) and pupil P(w) by FFT correlation (paper Eqs. 2-4).
 
-    ``source`` (real) and ``pupil`` (complex) share one frequency grid (..., My, Mx) in unshifted
-    FFT order: sample j sits at w = w0 + j·du (j from fftfreq). ``eta`` is η(w) on that grid,
-    needed when ``z_um`` is not 0. The outputs are sampled at the differences u = m·du in the
-    unshifted FFT order of ``out_shape`` (default: the input grid), shape (..., ny, nx), or
-    (Z, ..., ny, nx) for a sequence of z. The correlation is linear (zero padded), not circular.
-    ``norm`` is the source power ∫S (default the sum of ``source``).
+    Parameters
+    ----------
+    source : ndarray, float, (..., My, Mx)
+        S(w), real, on a frequency grid in unshifted FFT order: sample j sits at w = w0 + j·du.
+    pupil : ndarray, complex, (..., My, Mx)
+        P(w) on the same grid.
+    z_um : float or sequence of float
+        Defocus, µm (z > 0 farther from the objective).
+    eta : ndarray, optional
+        η(w) on that grid, cycles/µm; needed when ``z_um`` is not 0.
+    out_shape : (int, int), optional
+        Output grid (differences u = m·du, unshifted FFT order); default the input grid.
+    norm : float, optional
+        Source power ∫S (default the sum of ``source``).
+
+    Returns
+    -------
+    h_abs, h_phase : ndarray, complex64
+        (..., ny, nx) for a scalar z, (Z, ..., ny, nx) for a sequence. The correlation is linear
+        (zero padded), not circular.
     """
     s = np.asarray(source, dtype=float)
     p = np.asarray(pupil, dtype=complex)
@@ -99,8 +113,19 @@ def _embed(a, shape):
 
 # ------------------------------------------------------------ the two models
 def lenslet_case(optics: Optics, lenslet: Lenslet) -> str:
-    """'inside' (sub-aperture within the source disk: defocus contrast only), 'straddling'
-    (DPC-like) or 'outside' (dark field), docs/conventions.md."""
+    """Where a lenslet's sub-aperture lies relative to the source disk: the one lenslet-regime rule.
+
+    Parameters
+    ----------
+    optics : Optics
+    lenslet : Lenslet
+
+    Returns
+    -------
+    str
+        'inside' (wholly inside the source disk: incoherent, no first-order phase contrast),
+        'straddling' (DPC-like phase contrast) or 'outside' (dark field); docs/conventions.md.
+    """
     d = math.hypot(*lenslet.u)
     rho, rs = optics.subaperture_radius, optics.source_radius
     if d + rho <= rs:
@@ -115,9 +140,29 @@ def _frequency_steps(shape, pixel_um):
 
 
 def lenslet_transfer_functions(optics: Optics, lenslets, shape, pixel_um, z_um=0.0, oversample=1):
-    """(H_abs, H_phase) of each lenslet (K, [Z,] ny, nx) and their I0 (K,): full condenser disk,
-    sub-aperture P_obj·circ_k (docs/conventions.md). ``oversample`` samples the pupil r times finer
-    than the output grid (r = 1 is within 0.1% of the exact integral for the paper's optics)."""
+    """Weak-object transfer functions of each lenslet: full condenser disk, sub-aperture P_obj·circ_k.
+
+    Parameters
+    ----------
+    optics : Optics
+    lenslets : list of Lenslet
+    shape : (int, int)
+        View grid (ny, nx).
+    pixel_um : float
+        View pixel in object space, µm.
+    z_um : float or sequence of float
+        Defocus, µm.
+    oversample : int
+        Pupil sampling r times finer than the output grid (r = 1 is within 0.1% of the exact
+        integral for the paper's optics).
+
+    Returns
+    -------
+    h_abs, h_phase : ndarray, complex64, (K, ny, nx) or (K, Z, ny, nx)
+        Unshifted FFT order.
+    i0 : ndarray, float, (K,)
+        Each lenslet's direct-light background (fraction of the condenser light).
+    """
     setup = _LensletSetup(optics, lenslets, shape, pixel_um, oversample)
     zs = np.atleast_1d(np.asarray(z_um, dtype=float))
     h_abs, h_phase = (setup.embed(h) for h in setup.band(zs))  # (Z, K, ny, nx)
@@ -180,7 +225,23 @@ def _disk_power(radius, du):
 
 
 def paper_transfer_functions(optics: Optics, shape, pixel_um, z_um=0.0):
-    """{half: (H_abs, H_phase, I0)} of paper Eq. 4: half of the condenser disk, full pupil."""
+    """Transfer functions of paper Eq. 4: half of the condenser disk as the source, full pupil.
+
+    Parameters
+    ----------
+    optics : Optics
+    shape : (int, int)
+        Output grid (ny, nx).
+    pixel_um : float
+        Object pixel, µm.
+    z_um : float or sequence of float
+        Defocus, µm.
+
+    Returns
+    -------
+    dict
+        {half: (H_abs, H_phase, I0)} for 'up', 'down', 'left', 'right'.
+    """
     du = _frequency_steps(shape, pixel_um)
     r = optics.cutoff
     m_in = tuple(2 * int(math.ceil(r / d)) + 4 for d in du)
@@ -209,7 +270,25 @@ def dpc_transfer_functions(
 ) -> dict:
     """Transfer functions of the four halves and of the two DPC images on a z grid.
 
-    Returns a dict with
+    Parameters
+    ----------
+    optics : Optics
+    lenslets : list of Lenslet, optional
+        Default: every lenslet in the pupil.
+    shape : (int, int)
+        Output grid (ny, nx).
+    pixel_um : float, optional
+        Object pixel, µm (default the optics').
+    z_um : float or sequence of float
+        Defocus, µm.
+    model : {'lenslet', 'paper'}
+        The detection-split (lenslet) or half-source (paper Eq. 4) model.
+    warn : bool
+        Warn when the in-focus phase contrast is too weak to invert.
+
+    Returns
+    -------
+    dict with
       'H_abs', 'H_phase': {half: (ny, nx) or (Z, ny, nx) complex64}, unshifted FFT order,
       'I0': {half: float} (fraction of the condenser light the half collects),
       'dpc_phase', 'dpc_abs': {'ud'|'lr': ...} first-order TFs of (I1 − I2)/(I1 + I2),
@@ -267,8 +346,20 @@ def dpc_transfer_functions(
 
 
 def dpc_from_halves(h1, h2, i0_1, i0_2):
-    """First-order TF of (I1 − I2)/(I1 + I2) from the halves' TFs and backgrounds:
-    2 (I0_2 H_1 − I0_1 H_2)/(I0_1 + I0_2)², i.e. H_1/I0_1 for mirror-image halves."""
+    """First-order transfer function of (I1 − I2)/(I1 + I2) (paper Eq. 1).
+
+    Parameters
+    ----------
+    h1, h2 : ndarray, complex
+        Transfer functions of the two halves.
+    i0_1, i0_2 : float
+        Their direct-light backgrounds.
+
+    Returns
+    -------
+    ndarray, complex64
+        2 (I0_2 H_1 − I0_1 H_2)/(I0_1 + I0_2)², i.e. H_1/I0_1 for mirror-image halves.
+    """
     return (2.0 * (i0_2 * h1 - i0_1 * h2) / (i0_1 + i0_2) ** 2).astype(np.complex64)
 
 
