@@ -182,3 +182,19 @@ def test_the_reader_shows_frames_not_marked_done_as_nan(setup, tmp_path):
     root["ssdpc_done"][1] = 0  # as if killed between frame 1's chunks
     ri = read_complete(out, "ri")
     assert np.isnan(ri[1]).all() and np.isfinite(ri[[0, 2]]).all()
+
+
+@pytest.mark.parametrize("value, words", [(np.nan, "NaN/inf"), (9e12, "beyond any sample")])
+def test_an_unphysical_frame_is_not_written(setup, tmp_path, value, words):
+    recipe, frames = setup
+
+    class Bad(FakeRec):
+        def reconstruct(self, frame):
+            r = super().reconstruct(frame)
+            r.ri[0, 0, 0] = value
+            return r
+
+    out = tmp_path / "s.zarr"
+    with pytest.raises(SsdpcError, match=f"frame 0: .*{words}"):
+        reconstruct_series(frames, out, recipe, rec=Bad(), progress=False)
+    assert list(done_frames(out)) == [] and np.isnan(read_complete(out, "ri")).all()

@@ -190,8 +190,6 @@ def cmd_reconstruct(args):
 
     out = Path(args.output)
     is_zarr = out.suffix == ".zarr"
-    if not (is_zarr or out.name.endswith((".tif", ".tiff"))):
-        raise SsdpcError(f"output {out.name}: give a .ome.tif (one frame) or a .zarr (time series) path")
     save = outputs.parse_save(args.save)
     inputs = {
         "raw frame": args.raw,
@@ -208,6 +206,8 @@ def cmd_reconstruct(args):
         overwrite=args.overwrite,
         folders=["output"] if is_zarr else [],
     )
+    if not (is_zarr or out.name.endswith((".tif", ".tiff"))):
+        raise SsdpcError(f"output {out.name}: give a .ome.tif (one frame) or a .zarr (time series) path")
     distributed = args.workers is not None or args.scheduler is not None
     if distributed and not is_zarr:
         raise SsdpcError("--workers/--scheduler spread the frames of a time series; write it to OME-Zarr (-o OUT.zarr)")

@@ -220,6 +220,25 @@ def _write_frame(out: Path, t: int, images: dict) -> float:
     return time.perf_counter() - t0
 
 
+#: |Δn| beyond this is no sample in any medium: a wrong input or setting.
+MAX_DELTA_N = 0.5
+
+
+def _check_values(result, t: int) -> None:
+    """Refuse to write a frame whose RI is non-finite or unphysical (the run stops, resumable)."""
+    dn = np.asarray(result.ri, np.float64) - float(np.median(result.ri))
+    if not np.all(np.isfinite(dn)):
+        raise SsdpcError(
+            f"frame {t}: the reconstruction holds NaN/inf values and was not written; check the frame, --dz and --alpha"
+        )
+    peak = float(np.max(np.abs(dn))) if dn.size else 0.0
+    if peak > MAX_DELTA_N:
+        raise SsdpcError(
+            f"frame {t}: |Δn| reaches {peak:.3g}, beyond any sample (±{MAX_DELTA_N}); not written. Likely the "
+            "condenser NA of the optics differs from the one the frames were recorded with, or --alpha is too small"
+        )
+
+
 def process_frame(rec_or_recipe, source: FrameSource, t: int, out, save) -> dict:
     """Read frame t, reconstruct it, write its chunks and mark it done. Returns its timings.
     The same function runs serially and on Dask workers."""
@@ -228,6 +247,7 @@ def process_frame(rec_or_recipe, source: FrameSource, t: int, out, save) -> dict
     frame = source[t]
     t1 = time.perf_counter()
     result = rec.reconstruct(frame)
+    _check_values(result, t)
     t2 = time.perf_counter()
     write = _write_frame(Path(out), t, outputs.images(result, save))
     return {"t": int(t), "read_s": t1 - t0, "reconstruct_s": t2 - t1, "write_s": write, **result.timings}
