@@ -271,3 +271,23 @@ def test_13_messages_cite_only_files_of_the_repository():
         for p in (root / "src" / "napari_ssdpc" / sub).glob("*.py"):
             text = p.read_text()
             assert "shared/" not in text and "DESIGN.md" not in text, p
+
+
+@pytest.mark.parametrize(
+    "error, words",
+    [
+        (OSError(errno.EIO, "Input/output error"), "Input/output error; check the path and the disk"),
+        (OSError(errno.ENOSPC, "No space left on device"), "no space left on the device"),
+        (MemoryError(), "out of memory"),
+        (RecursionError(), "nested too deeply"),
+    ],
+)
+def test_an_unforeseen_fault_is_still_one_line(cli, monkeypatch, error, words):
+    import napari_ssdpc.physics.design as design
+
+    def fail(*a, **k):
+        raise error
+
+    monkeypatch.setattr(design, "design_table", fail)
+    rc, err = cli(["design"])
+    assert rc == 2 and words in err

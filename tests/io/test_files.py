@@ -141,3 +141,18 @@ def test_outputs_are_compared_with_inputs_after_resolving(tmp_path, monkeypatch)
         check_outputs({"calibration": "mine.json", "overlay": "mine.png"}, {}, sidecars=["overlay"])
     check_outputs({"calibration": "mine.json", "overlay": "mine.png"}, {}, sidecars=["overlay"], overwrite=True)
     assert raw.read_bytes() == b"raw" and (tmp_path / "mine.png").read_bytes() == b"holiday photo"
+
+
+@pytest.mark.parametrize("frames", [1, 3])
+def test_a_half_truncated_tiff_is_refused_by_both_readers(tmp_path, frames):
+    from napari_ssdpc.io.series import FrameSource
+
+    a = np.arange(frames * 64 * 80, dtype="u2").reshape(frames, 64, 80).squeeze()
+    full, half = tmp_path / "full.tif", tmp_path / "half.tif"
+    tifffile.imwrite(full, a, photometric="minisblack")
+    half.write_bytes(full.read_bytes()[: full.stat().st_size // 2])
+    with pytest.raises(SsdpcError, match="complete TIFF"):
+        read_frame(half)
+    with pytest.raises(SsdpcError, match="truncated"):
+        FrameSource(half)
+    np.testing.assert_array_equal(FrameSource(full)[frames - 1], a if frames == 1 else a[-1])

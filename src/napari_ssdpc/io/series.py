@@ -132,8 +132,19 @@ def _open_tiff(path: Path):
     try:
         tif = tifffile.TiffFile(path)
         series = tif.series[0]
-    except Exception as e:  # tifffile raises many types for foreign files
-        raise SsdpcError(f"{path}: not a readable TIFF ({type(e).__name__}); give a TIFF or OME-TIFF series") from None
+        size = path.stat().st_size
+        frames = int(np.prod(series.shape[:-2])) if len(series.shape) > 2 else 1
+        if len(tif.pages) < frames and not tif.is_imagej:
+            raise SsdpcError(f"{path}: truncated ({len(tif.pages)} of {frames} frames); copy the file again")
+        for k, page in enumerate(tif.pages):  # a truncated copy: refuse it now, not at frame k
+            if any(o + n > size for o, n in zip(page.dataoffsets, page.databytecounts)):
+                raise SsdpcError(f"{path}: truncated (page {k} ends beyond the file's end); copy the file again")
+    except SsdpcError:
+        raise
+    except Exception as e:  # tifffile raises many types for foreign or truncated files
+        raise SsdpcError(
+            f"{path}: not a readable TIFF ({type(e).__name__}); give a complete TIFF or OME-TIFF series"
+        ) from None
     return _PagedSeries(tif, series)
 
 
@@ -148,7 +159,11 @@ class _PagedSeries:
         self.ndim = len(shape)
 
     def __getitem__(self, t):
-        return self._tif.asarray(key=int(t) if self.ndim == 3 else 0, series=0).reshape(self.shape[-2:])
+        try:
+            return self._tif.asarray(key=int(t) if self.ndim == 3 else 0, series=0).reshape(self.shape[-2:])
+        except Exception as e:  # a damaged page
+            name = self._tif.filename
+            raise SsdpcError(f"{name}: frame {t} cannot be read ({type(e).__name__}); check the file") from None
 
 
 # ----------------------------------------------------------------- recipe
