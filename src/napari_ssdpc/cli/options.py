@@ -45,7 +45,7 @@ def add_reconstruction_options(parser: argparse.ArgumentParser) -> None:
         nargs=2,
         metavar=("ZMIN", "ZMAX"),
         help=f"z range in µm, z > 0 farther from the objective (default {fields['z_min_um'].default:g} "
-        f"{fields['z_max_um'].default:g}); write negative values as --z=-40 40 or --z -40 40",
+        f"{fields['z_max_um'].default:g}), e.g. --z -40 40 or --z -1e2 1e2",
     )
     for flag, name in FLAGS.items():
         ann = fields[name].annotation

@@ -13,41 +13,136 @@ import numpy as np
 import tifffile
 
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.files import atomic_write
+from napari_ssdpc.files import atomic_write, atomic_write_set
+
+__all__ = [
+    "atomic_write",
+    "create_ome_zarr",
+    "ngff_multiscales",
+    "read_frame",
+    "read_ome_zarr",
+    "write_ome_tiff",
+    "write_ome_tiffs",
+    "write_tiff",
+    "write_tiffs",
+]
 
 
-def read_frame(path, *, allow_series: bool = True) -> np.ndarray:
-    """Read a raw light-field frame (y, x) or series (t, y, x) from a TIFF/OME-TIFF."""
+def read_frame(path, *, allow_series: bool = True, name: str = "frame") -> np.ndarray:
+    """Read a raw light-field frame (y, x) or series (t, y, x) from a TIFF/OME-TIFF.
+
+    Parameters
+    ----------
+    path : str or Path
+        The TIFF file.
+    allow_series : bool
+        Accept a (t, y, x) series; else only one frame.
+    name : str
+        The frame's role, for the messages ("frame", "flat frame", "white frame").
+
+    Returns
+    -------
+    numpy.ndarray
+        (y, x) or (t, y, x), the file's dtype.
+
+    Raises
+    ------
+    SsdpcError
+        Missing, unreadable, truncated, colour (RGB) or a reconstruction result.
+    """
     path = Path(path)
+    if path.is_dir():
+        raise SsdpcError(f"{name} {path} is a folder; give a TIFF file")
     if not path.is_file():
         raise SsdpcError(f"file not found: {path} (check the path)")
     try:
-        data = tifffile.imread(path)
-    except Exception as e:  # tifffile raises many types for foreign files
-        raise SsdpcError(f"{path}: not a readable TIFF ({type(e).__name__}); give a TIFF or OME-TIFF frame") from None
+        with tifffile.TiffFile(path) as tif:
+            _check_kind(tif, path, name)
+            data = tif.asarray()
+    except SsdpcError:
+        raise
+    except OSError as e:
+        raise SsdpcError(f"{path}: cannot be read ({e.strerror or type(e).__name__}); check the file") from None
+    except Exception as e:  # tifffile raises many types for foreign or truncated files
+        raise SsdpcError(
+            f"{path}: not a readable TIFF ({type(e).__name__}); give a complete TIFF or OME-TIFF {name}"
+        ) from None
     data = np.squeeze(data)
     if data.ndim == 3 and not allow_series:
-        raise SsdpcError(f"{path}: holds {data.shape[0]} frames; give a single frame (y, x)")
+        raise SsdpcError(f"{path}: holds {data.shape[0]} frames; give a single {name} (y, x)")
     if data.ndim not in (2, 3):
         raise SsdpcError(f"{path}: expected a 2D frame or a (t, y, x) series, got shape {data.shape}")
     return data
 
 
+def _check_kind(tif, path: Path, name: str) -> None:
+    """Refuse colour images and ssdpc results given where a raw camera frame belongs."""
+    page = tif.pages[0]
+    series = tif.series[0] if tif.series else None
+    axes = series.axes if series is not None else ""
+    if int(getattr(page, "samplesperpixel", 1)) > 1 or "S" in axes:
+        raise SsdpcError(
+            f"{path}: a colour (RGB) image, not a raw camera frame; give the monochrome camera frame "
+            "(export it as greyscale TIFF without colour conversion)"
+        )
+    text = page.description or ""
+    if "napari-ssdpc" in text and "quantity" in text:
+        what = next((q for q in ("refractive index", "phase", "absorption", "DPC") if q in text), "a volume")
+        raise SsdpcError(
+            f"{path}: a reconstruction result ({what}) of `ssdpc reconstruct`, not a raw {name}; "
+            "give the camera frame the result was computed from"
+        )
+    if "Z" in axes:
+        raise SsdpcError(f"{path}: a z stack (axes {axes}), not a raw camera {name}; give the light-field frame (y, x)")
+
+
 def write_tiff(path, data, *, metadata=None, **kwargs) -> Path:
-    """Write a (multi-page) TIFF atomically."""
-    path = Path(path)
-    data = np.asarray(data)
+    """Write a (multi-page) TIFF atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+    data : array_like
+        (y, x) frame or (t, y, x) series.
+    metadata : dict, optional
+        tifffile metadata; a series gets ``{"axes": "TYX"}``.
+    **kwargs
+        Passed to ``tifffile.imwrite``.
+
+    Returns
+    -------
+    Path
+    """
+    return write_tiffs({path: data}, metadata=metadata, **kwargs)[0]
+
+
+def write_tiffs(files: dict, *, metadata=None, **kwargs) -> list[Path]:
+    """Write several TIFFs as one unit (all complete before any is renamed into place).
+
+    Parameters
+    ----------
+    files : dict
+        ``{path: data}``.
+    metadata : dict, optional
+        As for :func:`write_tiff`.
+    **kwargs
+        Passed to ``tifffile.imwrite``.
+
+    Returns
+    -------
+    list of Path
+    """
+    paths = [Path(p) for p in files]
     kwargs.setdefault("photometric", "minisblack")  # a (3, H, W) series is frames, not RGB planes
-    if metadata is None and data.ndim == 3:
-        metadata = {"axes": "TYX"}
-    with atomic_write(path) as tmp:
-        tifffile.imwrite(tmp, data, metadata=metadata, **kwargs)
-    return path
+    with atomic_write_set(paths) as temps:
+        for tmp, data in zip(temps, files.values()):
+            data = np.asarray(data)
+            meta = {"axes": "TYX"} if metadata is None and data.ndim == 3 else metadata
+            tifffile.imwrite(tmp, data, metadata=meta, **kwargs)
+    return paths
 
 
-def write_ome_tiff(path, data, *, axes: str, voxel_um=None, description: dict | None = None) -> Path:
-    """Write an OME-TIFF with physical pixel sizes (µm) and a JSON description in the
-    OME metadata. ``axes`` like 'ZYX' or 'TZYX'; ``voxel_um`` is (dz, dy, dx)."""
+def _ome_meta(axes: str, voxel_um=None, description: dict | None = None) -> dict:
     meta = {"axes": axes}
     if voxel_um is not None:
         dz, dy, dx = (float(v) for v in voxel_um)
@@ -61,10 +156,51 @@ def write_ome_tiff(path, data, *, axes: str, voxel_um=None, description: dict | 
         )
     if description:
         meta["Description"] = json.dumps(description)
-    path = Path(path)
-    with atomic_write(path) as tmp:
-        tifffile.imwrite(tmp, np.asarray(data), ome=True, metadata=meta)
-    return path
+    return meta
+
+
+def write_ome_tiff(path, data, *, axes: str, voxel_um=None, description: dict | None = None) -> Path:
+    """Write an OME-TIFF atomically, with physical pixel sizes and a JSON description.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    data : array_like
+        The image.
+    axes : str
+        OME axes, like 'ZYX' or 'TZYX'.
+    voxel_um : tuple of float, optional
+        (dz, dy, dx) in µm.
+    description : dict, optional
+        Stored as JSON in the OME metadata.
+
+    Returns
+    -------
+    Path
+    """
+    return write_ome_tiffs({path: (data, axes, voxel_um, description)})[0]
+
+
+def write_ome_tiffs(files: dict) -> list[Path]:
+    """Write several OME-TIFFs as one unit: every file is complete before any is renamed into
+    place, so a failure (a full disk) leaves all the old files, never a mixed set.
+
+    Parameters
+    ----------
+    files : dict
+        ``{path: (data, axes, voxel_um, description)}`` as for :func:`write_ome_tiff`.
+
+    Returns
+    -------
+    list of Path
+    """
+    paths = [Path(p) for p in files]
+    with atomic_write_set(paths) as temps:
+        for tmp, (data, axes, voxel_um, description) in zip(temps, files.values()):
+            meta = _ome_meta(axes, voxel_um, description)
+            tifffile.imwrite(tmp, np.asarray(data), ome=True, photometric="minisblack", metadata=meta)
+    return paths
 
 
 # ------------------------------------------------------------------ OME-Zarr

@@ -27,10 +27,11 @@ from pathlib import Path
 import numpy as np
 
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.files import os_error
+from napari_ssdpc.io.store import DONE, StoreLock, done_frames, open_store
 from napari_ssdpc.reconstruction import outputs
 
-DONE = "ssdpc_done"  # root array: 1 where a frame is completely written
-_STAMP = "ssdpc_series"  # root attribute: what the store holds (input, settings, outputs)
+__all__ = ["DONE", "FrameSource", "Recipe", "SeriesReport", "done_frames", "process_frame", "reconstruct_series"]
 
 
 # ------------------------------------------------------------------- input
@@ -57,10 +58,43 @@ class FrameSource:
 
     @property
     def fingerprint(self) -> str:
-        """The path, or for an array a hash of its first frame."""
-        if self.path is not None:
-            return self.name
-        return "array:" + hashlib.sha256(np.ascontiguousarray(self[0]).tobytes()).hexdigest()[:16]
+        """The path, or for an array a hash of its content."""
+        return self.name if self.path is not None else "array:" + self.identity()["sha256"][:16]
+
+    def identity(self) -> dict:
+        """What the frames are: path, size (bytes), modification time (ns), frame count and the
+        SHA-256 of the file's (or the array's) content.
+
+        Returns
+        -------
+        dict
+        """
+        h = hashlib.sha256()
+        if self.path is None:
+            a = np.ascontiguousarray(self._array)
+            h.update(f"{a.dtype.str}{a.shape}".encode())
+            h.update(a.tobytes())
+            return {
+                "path": "array",
+                "size": int(a.nbytes),
+                "mtime_ns": None,
+                "frames": len(self),
+                "sha256": h.hexdigest(),
+            }
+        try:
+            st = self.path.stat()
+            with open(self.path, "rb") as f:
+                for block in iter(lambda: f.read(1 << 22), b""):
+                    h.update(block)
+        except OSError as e:
+            raise os_error(e, self.path, "reading") from None
+        return {
+            "path": self.name,
+            "size": int(st.st_size),
+            "mtime_ns": int(st.st_mtime_ns),
+            "frames": len(self),
+            "sha256": h.hexdigest(),
+        }
 
     def _open(self):
         if self._array is not None:
@@ -98,8 +132,19 @@ def _open_tiff(path: Path):
     try:
         tif = tifffile.TiffFile(path)
         series = tif.series[0]
-    except Exception as e:  # tifffile raises many types for foreign files
-        raise SsdpcError(f"{path}: not a readable TIFF ({type(e).__name__}); give a TIFF or OME-TIFF series") from None
+        size = path.stat().st_size
+        frames = int(np.prod(series.shape[:-2])) if len(series.shape) > 2 else 1
+        if len(tif.pages) < frames and not tif.is_imagej:
+            raise SsdpcError(f"{path}: truncated ({len(tif.pages)} of {frames} frames); copy the file again")
+        for k, page in enumerate(tif.pages):  # a truncated copy: refuse it now, not at frame k
+            if any(o + n > size for o, n in zip(page.dataoffsets, page.databytecounts)):
+                raise SsdpcError(f"{path}: truncated (page {k} ends beyond the file's end); copy the file again")
+    except SsdpcError:
+        raise
+    except Exception as e:  # tifffile raises many types for foreign or truncated files
+        raise SsdpcError(
+            f"{path}: not a readable TIFF ({type(e).__name__}); give a complete TIFF or OME-TIFF series"
+        ) from None
     return _PagedSeries(tif, series)
 
 
@@ -114,7 +159,11 @@ class _PagedSeries:
         self.ndim = len(shape)
 
     def __getitem__(self, t):
-        return self._tif.asarray(key=int(t) if self.ndim == 3 else 0, series=0).reshape(self.shape[-2:])
+        try:
+            return self._tif.asarray(key=int(t) if self.ndim == 3 else 0, series=0).reshape(self.shape[-2:])
+        except Exception as e:  # a damaged page
+            name = self._tif.filename
+            raise SsdpcError(f"{name}: frame {t} cannot be read ({type(e).__name__}); check the file") from None
 
 
 # ----------------------------------------------------------------- recipe
@@ -172,62 +221,37 @@ def _describe(recipe: Recipe, save):
     return outputs.layout(len(rec.z_um), rec.mask.shape, save), (dz, dy, dy), rec.settings(), rec.build_seconds
 
 
-# ------------------------------------------------------------------ store
-def _open_store(out: Path, n_frames, layout, voxel, stamp: dict, attrs: dict):
-    """Create the store, or reopen it to resume the same job. Returns the done-flags array."""
-    import zarr
-
-    from napari_ssdpc.io.frames import create_ome_zarr
-
-    fresh = not out.exists() or not any(p.name not in (".zgroup", ".zattrs") for p in out.iterdir())
-    root = zarr.open_group(str(out), mode="a", zarr_format=2)
-    old = root.attrs.get(_STAMP)
-    if old is None and not fresh:
-        raise SsdpcError(f"{out} exists and was not written by `ssdpc reconstruct`; choose a new output path")
-    if old is not None and old != stamp:
-        raise SsdpcError(
-            f"{out} holds a reconstruction of another input or with other settings; "
-            "choose a new output path or delete the old one to start over"
-        )
-    if old is None:
-        root.attrs[_STAMP] = stamp  # first: a rerun recognises its own store
-    for name, (shape, axes, what) in layout.items():
-        complete = name in root and "0" in root[name]  # else a killed run left it half made
-        create_ome_zarr(
-            out,
-            name,
-            (n_frames,) + tuple(shape),
-            "T" + axes,
-            voxel,
-            attrs={**attrs, "quantity": what},
-            overwrite=not complete,
-        )
-    if DONE not in root:
-        root.create_array(DONE, shape=(n_frames,), chunks=(1,), dtype="uint8", fill_value=0)
-    for p in out.rglob("*.partial"):  # a temporary chunk file of a killed run
-        p.unlink(missing_ok=True)
-    return root[DONE]
-
-
-def done_frames(out) -> np.ndarray:
-    """Indices of the frames completely written to a series store."""
-    import zarr
-
-    root = zarr.open_group(str(out), mode="r")
-    if DONE not in root:
-        return np.zeros(0, int)
-    return np.flatnonzero(root[DONE][:] == 1)
-
-
 def _write_frame(out: Path, t: int, images: dict) -> float:
     import zarr
 
     t0 = time.perf_counter()
-    root = zarr.open_group(str(out), mode="r+")
-    for name, (data, _, _) in images.items():
-        root[name]["0"][t] = data
-    root[DONE][t] = 1  # only after every chunk of the frame is on disk
+    try:
+        root = zarr.open_group(str(out), mode="r+")
+        for name, (data, _, _) in images.items():
+            root[name]["0"][t] = data
+        root[DONE][t] = 1  # only after every chunk of the frame is on disk
+    except OSError as e:
+        raise os_error(e, out) from None
     return time.perf_counter() - t0
+
+
+#: |Δn| beyond this is no sample in any medium: a wrong input or setting.
+MAX_DELTA_N = 0.5
+
+
+def _check_values(result, t: int) -> None:
+    """Refuse to write a frame whose RI is non-finite or unphysical (the run stops, resumable)."""
+    dn = np.asarray(result.ri, np.float64) - float(np.median(result.ri))
+    if not np.all(np.isfinite(dn)):
+        raise SsdpcError(
+            f"frame {t}: the reconstruction holds NaN/inf values and was not written; check the frame, --dz and --alpha"
+        )
+    peak = float(np.max(np.abs(dn))) if dn.size else 0.0
+    if peak > MAX_DELTA_N:
+        raise SsdpcError(
+            f"frame {t}: |Δn| reaches {peak:.3g}, beyond any sample (±{MAX_DELTA_N}); not written. Likely the "
+            "condenser NA of the optics differs from the one the frames were recorded with, or --alpha is too small"
+        )
 
 
 def process_frame(rec_or_recipe, source: FrameSource, t: int, out, save) -> dict:
@@ -238,6 +262,7 @@ def process_frame(rec_or_recipe, source: FrameSource, t: int, out, save) -> dict
     frame = source[t]
     t1 = time.perf_counter()
     result = rec.reconstruct(frame)
+    _check_values(result, t)
     t2 = time.perf_counter()
     write = _write_frame(Path(out), t, outputs.images(result, save))
     return {"t": int(t), "read_s": t1 - t0, "reconstruct_s": t2 - t1, "write_s": write, **result.timings}
@@ -278,8 +303,10 @@ def reconstruct_series(
     process at most this many pending frames (a partial run, for tests and previews)."""
     source = source if isinstance(source, FrameSource) else FrameSource(source)
     out = Path(out)
-    if not out.parent.exists():
+    if not out.parent.is_dir():
         raise SsdpcError(f"output folder does not exist: {out.parent} (create it first)")
+    if out.exists() and not out.is_dir():
+        raise SsdpcError(f"{out} exists and is a file, not an OME-Zarr folder; choose a new output path")
     save = [s for s in save]
     save = outputs.parse_save(save)
     if workers is not None and workers < 1:
@@ -293,6 +320,8 @@ def reconstruct_series(
             f"{tuple(recipe.calibration.frame_shape)}; use the calibration of this camera ROI"
         )
     cluster = client = None
+    lock = StoreLock(out)
+    lock.__enter__()  # one writer per store
     try:
         if distributed:
             client, cluster = _client(workers, scheduler)
@@ -306,14 +335,14 @@ def reconstruct_series(
                 rec.build_seconds,
             )
         stamp = {
-            "input": source.fingerprint,
+            "input": source.identity(),
             "frames": len(source),
             "frame_shape": list(source.shape[1:]),
             "recipe": recipe.result_key,
             "outputs": sorted(layout),
         }
         attrs = {**(meta or {}), "settings": settings}
-        done = _open_store(out, len(source), layout, voxel, stamp, attrs)
+        done = open_store(out, len(source), layout, voxel, stamp, attrs)
         finished = set(np.flatnonzero(done[:] == 1).tolist())
         pending = [t for t in range(len(source)) if t not in finished]
         if stop_after is not None:
@@ -337,6 +366,7 @@ def reconstruct_series(
             sorted(timings, key=lambda d: d["t"]),
         )
     finally:
+        lock.__exit__(None, None, None)
         if client is not None:
             client.close()
         if cluster is not None:

@@ -1,0 +1,283 @@
+"""Checks at the command line's boundary, before anything is computed or written.
+
+- :func:`check_optics_match`: the optics in use against the calibration's (magnification,
+  pitch, pixel size, wavelength) and against the lattice pitch measured on the white frame.
+- :func:`check_memory`: an estimate of the operators and outputs against the free memory.
+- :func:`check_flat` and :func:`check_frame_light`: a flat or raw frame without light, all
+  saturated, inverted, noise only or white (condenser open) is refused with what is wrong.
+- :func:`check_result`: non-finite or unphysical volumes are refused before writing.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+
+from napari_ssdpc.errors import SsdpcError
+
+__all__ = [
+    "MAX_DELTA_N",
+    "available_memory",
+    "check_flat",
+    "check_frame_light",
+    "check_memory",
+    "check_optics_match",
+    "check_result",
+    "estimate_memory",
+]
+
+#: |Δn| beyond this is no biological or polymer sample in any medium: a wrong input or setting.
+MAX_DELTA_N = 0.5
+_FULL_SCALE = {2**b - 1 for b in range(8, 17)}
+
+
+def check_optics_match(optics, cal, source: str = "--optics") -> None:
+    """Refuse optics that do not describe the instrument the calibration was made on.
+
+    Parameters
+    ----------
+    optics : Optics
+        The optics in use.
+    cal : Calibration
+        The calibration (its optics and its measured lattice pitch).
+    source : str
+        Where the optics come from, for the message.
+
+    Raises
+    ------
+    SsdpcError
+        Magnification, MLA pitch, pixel size or wavelength differ by more than 1 %, or the
+        measured pitch differs from the optics' by more than 3 %.
+    """
+    for what, attr, unit in (
+        ("objective magnification", "magnification", "x"),
+        ("MLA pitch", "pitch_um", " µm"),
+        ("camera pixel size", "pixel_um", " µm"),
+        ("wavelength", "wavelength_um", " µm"),
+    ):
+        a, b = float(getattr(optics, attr)), float(getattr(cal.optics, attr))
+        if abs(a - b) > 0.01 * abs(b):
+            raise SsdpcError(
+                f"the optics ({source}) and the calibration disagree on the {what} ({a:g}{unit} vs {b:g}{unit}); "
+                "recalibrate with these optics (`ssdpc calibrate WHITE.tif --optics ...`) or use the matching file"
+            )
+    measured, expected = float(cal.grid.pitch_px), float(optics.pitch_px)
+    if abs(measured - expected) > 0.03 * expected:
+        raise SsdpcError(
+            f"the calibration's lattice pitch {measured:.2f} px differs from the optics' {expected:.2f} px by "
+            f"{100 * abs(measured / expected - 1):.0f}%: the calibration or its optics were edited or belong to "
+            "another instrument; recalibrate on a white frame"
+        )
+
+
+def available_memory() -> int:
+    """Free memory in bytes (MemAvailable), or the physical memory where that is unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return 1 << 40
+
+
+def estimate_memory(optics, cal, settings, stacks: bool) -> dict:
+    """Bytes the Reconstructor's operators and one frame's outputs will take (an upper estimate).
+
+    Parameters
+    ----------
+    optics : Optics
+    cal : Calibration
+    settings : ReconstructionSettings
+    stacks : bool
+        Whether the Richardson-Lucy stacks are computed.
+
+    Returns
+    -------
+    dict
+        ``planes``, ``lenslets``, ``operators`` and ``outputs`` (bytes) and ``total``.
+    """
+    planes = int(math.floor((settings.z_max_um - settings.z_min_um) / settings.dz_um + 1e-6)) + 1
+    side = 2 * math.ceil(cal.ei_radius_px) + 1
+    view = side * side  # pixels per view
+    k = max(1, len(cal.lenslets))
+    with_rl = stacks or settings.method == "rl"
+    # (K x Z x band) complex64 operators: WOTF once, RL per half (each lenslet in two halves)
+    ops = k * planes * (view // 2) * 8 * ((settings.method == "wotf") + 2 * with_rl)
+    if with_rl:  # per half and plane: padded (~1.7x view side) support and normalisation arrays
+        ops += 4 * planes * int(3 * view) * 12
+    outputs = planes * view * 4 * (3 + 6 * with_rl)  # ri, delta_n, phase (+ stacks, dpc, absorption)
+    return {"planes": planes, "lenslets": k, "operators": ops, "outputs": outputs, "total": ops + outputs}
+
+
+def check_memory(optics, cal, settings, stacks: bool, available: int | None = None) -> dict:
+    """Refuse a reconstruction whose operators and outputs do not fit in the free memory.
+
+    Parameters
+    ----------
+    optics, cal, settings, stacks
+        As for :func:`estimate_memory`.
+    available : int, optional
+        Free bytes; default :func:`available_memory`.
+
+    Returns
+    -------
+    dict
+        The estimate.
+    """
+    est = estimate_memory(optics, cal, settings, stacks)
+    free = available_memory() if available is None else int(available)
+    if est["total"] > 0.8 * free:
+        gib = 1 << 30
+        factor = math.ceil(est["total"] / (0.8 * free))
+        raise SsdpcError(
+            f"this reconstruction needs about {est['total'] / gib:.1f} GiB (operators {est['operators'] / gib:.1f} "
+            f"GiB for up to {est['lenslets']} lenslets x {est['planes']} planes, outputs {est['outputs'] / gib:.1f} "
+            f"GiB) but {free / gib:.1f} GiB are free; narrow --z or take a larger --dz "
+            f"(e.g. --dz {settings.dz_um * factor:g})"
+        )
+    return est
+
+
+def _level_stats(img, cal, dark):
+    """Per-lenslet median light above the dark level, and the noise of the dark pixels."""
+    from napari_ssdpc.calibration.calibrate import extract_views
+
+    views = extract_views(img - dark, cal)
+    levels = np.array([np.median(v[views.mask]) for v in views.data])
+    step = 8
+    yy, xx = np.mgrid[0 : img.shape[0] : step, 0 : img.shape[1] : step]
+    far = np.ones(yy.shape, bool)
+    for cx, cy in cal.centres_px:
+        far &= (xx - cx) ** 2 + (yy - cy) ** 2 > (1.2 * cal.ei_radius_px) ** 2
+    outside = img[yy[far], xx[far]] if far.any() else img.ravel()
+    noise = 1.4826 * float(np.median(np.abs(outside - np.median(outside))))
+    return levels, max(noise, 1e-6)
+
+
+def _constant(raw, img, name: str) -> None:
+    lo, hi = float(img.min()), float(img.max())
+    if hi > lo:
+        return
+    if hi in _FULL_SCALE:
+        raise SsdpcError(
+            f"{name}: every pixel is {hi:g}, the top of the camera's range: the camera was saturated; "
+            "shorten the exposure or dim the lamp and record it again"
+        )
+    if hi == 0:
+        raise SsdpcError(f"{name}: every pixel is 0: no light reached the camera; check the lamp and the shutter")
+    raise SsdpcError(f"{name}: every pixel is {hi:g}: there is no image in it; check the camera and the file")
+
+
+def _saturated(raw, name: str) -> None:
+    from napari_ssdpc.calibration.saturation import saturated_fraction
+
+    frac = saturated_fraction(raw)
+    if frac > 0.2:
+        raise SsdpcError(f"{name}: {100 * frac:.0f}% of the pixels are saturated; shorten the exposure or dim the lamp")
+
+
+def check_flat(flat, optics, cal) -> None:
+    """Refuse a flat frame without light, saturated, or recorded with the condenser open (white).
+
+    Parameters
+    ----------
+    flat : numpy.ndarray
+        The flat frame (y, x).
+    optics : Optics
+        The optics in use (its condenser NA).
+    cal : Calibration
+    """
+    from napari_ssdpc.reconstruction.pipeline import estimate_dark
+
+    name = "flat frame"
+    img = cal.check_frame(flat, name=name)
+    _constant(flat, img, name)
+    _saturated(flat, name)
+    levels, noise = _level_stats(img, cal, estimate_dark(img, cal))
+    top = float(np.nanmax(levels))
+    if not top > 5 * noise:
+        raise SsdpcError(
+            f"{name}: no light in the elemental images (brightest {top:.3g} above the dark level, noise {noise:.3g}); "
+            "record the flat with the lamp on, the condenser at the raw frames' NA and no sample"
+        )
+    lit = float(np.mean(levels >= 0.5 * top))
+    expected = min(1.0, float(optics.sigma) ** 2)
+    if expected < 0.5 and lit > expected + 0.4:
+        raise SsdpcError(
+            f"{name}: {100 * lit:.0f}% of the lenslets are evenly lit, as on a white frame (condenser fully open), "
+            f"but the condenser NA {optics.condenser_na:g} lights about {100 * expected:.0f}%; record the flat at the "
+            "condenser NA of the raw frames"
+        )
+
+
+def check_frame_light(frame, rec, name: str = "frame") -> None:
+    """Refuse a raw frame without light in the lit lenslets' views, or unlike the flat.
+
+    Parameters
+    ----------
+    frame : numpy.ndarray
+        The raw frame (y, x).
+    rec : Reconstructor
+        Built for this calibration; ``rec.lit`` and ``rec.level`` (the flat's or the model's
+        direct light per lenslet).
+    name : str
+        For the message.
+    """
+    from napari_ssdpc.reconstruction.pipeline import estimate_dark
+
+    cal = rec.calibration
+    img = cal.check_frame(frame, name=name)
+    _constant(frame, img, name)
+    _saturated(frame, name)
+    levels, noise = _level_stats(img, cal, estimate_dark(img, cal))
+    lit = levels[rec.lit]
+    signal = float(np.median(lit))
+    if not signal > 5 * noise:
+        raise SsdpcError(
+            f"{name}: no light in the directly lit elemental images (median {signal:.3g} above the dark level, "
+            f"noise {noise:.3g}): the lamp was off, the frame is inverted or noise only, or it comes from "
+            "another instrument; give a raw light-field frame of this microscope"
+        )
+    ratio = lit / np.maximum(np.asarray(rec.level, float)[rec.lit], 1e-12)
+    spread = float(np.std(ratio) / np.mean(ratio))
+    if spread > 0.5:
+        raise SsdpcError(
+            f"{name}: the lit lenslets' brightness differs from the flat's by {100 * spread:.0f}% (rms): the frame "
+            "does not look like this instrument's frames at this condenser NA; check the calibration, the flat "
+            "and the condenser aperture"
+        )
+
+
+def check_result(delta_n, optics, name: str = "volume") -> None:
+    """Refuse a non-finite or unphysical Δn volume before it is written.
+
+    Parameters
+    ----------
+    delta_n : numpy.ndarray
+        Refractive-index difference to the medium.
+    optics : Optics
+        For the message (condenser NA).
+    name : str
+        For the message.
+    """
+    dn = np.asarray(delta_n)
+    bad = int(dn.size - np.count_nonzero(np.isfinite(dn)))
+    if bad:
+        raise SsdpcError(
+            f"the reconstructed {name} holds {bad} NaN/inf values; nothing was written. Check --dz and --alpha "
+            "(finite, in range) and the flat frame"
+        )
+    peak = float(np.max(np.abs(dn))) if dn.size else 0.0
+    if peak > MAX_DELTA_N:
+        raise SsdpcError(
+            f"the reconstructed {name} reaches |Δn| = {peak:.3g}, beyond any sample (±{MAX_DELTA_N}); nothing was "
+            f"written. Likely the condenser NA of the optics ({optics.condenser_na:g}) is not the one the frames "
+            "were recorded with, or --alpha is far too small"
+        )

@@ -1,0 +1,315 @@
+"""The ``ssdpc`` subcommands. Each checks every input and output before it computes or writes.
+
+Outputs are compared with the inputs (:func:`napari_ssdpc.io.paths.check_outputs`) first; sets
+of files are written as one unit; results are checked (:mod:`.checks`) before they are written.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from napari_ssdpc import __version__
+from napari_ssdpc.cli import checks
+from napari_ssdpc.cli.options import run_config
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.io.paths import check_outputs, writable_folder
+from napari_ssdpc.reconstruction import outputs
+
+__all__ = [
+    "PHANTOMS",
+    "cmd_bench",
+    "cmd_calibrate",
+    "cmd_demo",
+    "cmd_design",
+    "cmd_reconstruct",
+    "cmd_simulate",
+    "make_phantom",
+    "output_paths",
+]
+
+PHANTOMS = ("bead", "two-beads", "cell", "bars", "moving")
+
+
+def _optics(path):
+    from napari_ssdpc.settings.optics import Optics
+
+    return Optics.paper() if path is None else Optics.from_yaml(path)
+
+
+def cmd_design(args):
+    from napari_ssdpc.physics.design import design, design_table
+
+    optics = _optics(args.optics)
+    print(json.dumps(design(optics), indent=2) if args.json else design_table(optics))
+
+
+def cmd_calibrate(args):
+    from napari_ssdpc.calibration.calibrate import calibrate, overlay_png
+    from napari_ssdpc.io.frames import read_frame
+
+    out = Path(args.output)
+    png = out.with_suffix(".png")
+    check_outputs(
+        {"calibration": out, "overlay": png},
+        {"white frame": args.frame, "optics file": args.optics},
+        sidecars=["overlay"],
+        overwrite=args.overwrite,
+        replaceable=lambda p: p.suffix == ".png" and _is_calibration(out),
+    )
+    optics = _optics(args.optics)
+    frame = read_frame(args.frame, allow_series=False, name="white frame")
+    cal = calibrate(frame, optics)
+    overlay_png(frame, cal, png)  # the overlay first: a failure leaves no new JSON without its overlay
+    cal.to_json(out)
+    g = cal.grid
+    print(
+        f"optical axis (x, y) = ({g.axis_px[0]:.2f}, {g.axis_px[1]:.2f}) px, pitch {g.pitch_px:.3f} px, "
+        f"rotation {g.rotation_deg:+.3f} deg, {len(cal.lenslets)} lenslets"
+    )
+    print(f"wrote {out} and {png}")
+
+
+def _is_calibration(path: Path) -> bool:
+    from napari_ssdpc.io.paths import is_ours
+
+    return path.is_file() and is_ours(path)
+
+
+def make_phantom(name, optics, *, n_frames=20):
+    """Phantom (a list of phantoms for 'moving') and the optics with the phantom's medium.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`PHANTOMS`.
+    optics : Optics
+    n_frames : int
+        Frames of 'moving'.
+
+    Returns
+    -------
+    tuple
+        (phantom or list of phantoms, Optics)
+    """
+    from napari_ssdpc.simulation import phantoms
+
+    makers = {
+        "bead": phantoms.pmma_bead,
+        "two-beads": phantoms.two_beads,
+        "cell": phantoms.cell,
+        "bars": phantoms.bar_target,
+        "moving": lambda: phantoms.moving_sample(n_frames),
+    }
+    if name not in makers:
+        raise SsdpcError(f"unknown phantom '{name}'; choose one of {', '.join(PHANTOMS)}")
+    ph = makers[name]()
+    first = ph[0] if isinstance(ph, list) else ph
+    if first.medium_index is not None:
+        optics = optics.replace(medium_index=float(first.medium_index))
+    return ph, optics
+
+
+def _check_simulate_numbers(args, optics):
+    dx, dy = args.offset
+    if not (math.isfinite(dx) and math.isfinite(dy)):
+        raise SsdpcError(f"--offset {dx:g} {dy:g}: give finite numbers of pixels")
+    reach = 0.5 * float(optics.pitch_px)
+    if abs(dx) > reach or abs(dy) > reach:
+        raise SsdpcError(
+            f"--offset {dx:g} {dy:g} px: the axis offset from the lattice vertex is at most half a pitch "
+            f"(±{reach:.1f} px); give a smaller offset"
+        )
+    if not math.isfinite(args.rotation) or abs(args.rotation) > 45:
+        raise SsdpcError(f"--rotation {args.rotation:g}: give a finite angle between -45 and 45 degrees")
+    if args.seed < 0:
+        raise SsdpcError(f"--seed {args.seed}: give a seed >= 0")
+    if args.frames < 1 or args.frames > 10000:
+        raise SsdpcError(f"--frames {args.frames}: give 1 to 10000 frames")
+
+
+def cmd_simulate(args):
+    from napari_ssdpc.io.frames import write_tiffs
+    from napari_ssdpc.physics.lattice import Grid
+    from napari_ssdpc.progress import tqdm_callback
+    from napari_ssdpc.simulation import simulate as sim
+
+    wanted = {"frame": args.output, "flat frame": args.flat, "white frame": args.white}
+    outs = check_outputs({k: v for k, v in wanted.items() if v}, {"optics file": args.optics})
+    optics = _optics(args.optics)
+    _check_simulate_numbers(args, optics)
+    phantom, optics = make_phantom(args.phantom, optics, n_frames=args.frames)
+    grid = Grid.nominal(optics, axis_offset_px=tuple(args.offset), rotation_deg=args.rotation)
+    rng = np.random.default_rng(args.seed)
+    phantoms = phantom if isinstance(phantom, list) else [phantom]
+    frames = []
+    for i, ph in enumerate(phantoms):
+        with tqdm_callback(f"frame {i + 1}/{len(phantoms)}") as cb:
+            frames.append(sim.simulate(ph, optics, grid=grid, rng=rng, progress=cb).frame)
+    data = {outs["frame"]: np.stack(frames) if len(frames) > 1 else frames[0]}
+    if "flat frame" in outs:
+        data[outs["flat frame"]] = sim.flat_frame(optics, grid=grid, rng=rng)
+    if "white frame" in outs:
+        data[outs["white frame"]] = sim.white_frame(optics, grid=grid, rng=rng)
+    write_tiffs(data)
+    print(f"wrote {outs['frame']} {frames[0].shape} x {len(frames)} frame(s)")
+    for role in ("flat frame", "white frame"):
+        if role in outs:
+            print(f"wrote {role} {outs[role]}")
+
+
+def output_paths(out: Path, names) -> dict:
+    """OME-TIFF: RI in OUT.ome.tif, the others beside it as OUT_<name>.ome.tif.
+
+    Parameters
+    ----------
+    out : Path
+        The main output.
+    names : iterable of str
+        Quantities ('ri' first).
+
+    Returns
+    -------
+    dict of str to Path
+    """
+    stem = out.name[: -len(".ome.tif")] if out.name.endswith(".ome.tif") else out.stem
+    return {
+        n: out if n == "ri" else out.with_name(f"{stem}{outputs.QUANTITIES[n].file_suffix()}.ome.tif") for n in names
+    }
+
+
+def cmd_reconstruct(args):
+    from napari_ssdpc.calibration.calibrate import Calibration
+    from napari_ssdpc.io.frames import read_frame, write_ome_tiffs
+    from napari_ssdpc.io.series import FrameSource, Recipe
+    from napari_ssdpc.progress import tqdm_callback
+
+    out = Path(args.output)
+    is_zarr = out.suffix == ".zarr"
+    save = outputs.parse_save(args.save)
+    inputs = {
+        "raw frame": args.raw,
+        "calibration": args.calibration,
+        "flat frame": args.flat,
+        "optics file": args.optics,
+        "settings file": args.config,
+    }
+    paths = output_paths(out, ["ri", *save])
+    check_outputs(
+        {("output" if n == "ri" else f"{n} output"): p for n, p in paths.items()},
+        inputs,
+        sidecars=[f"{n} output" for n in save],
+        overwrite=args.overwrite,
+        folders=["output"] if is_zarr else [],
+    )
+    if not (is_zarr or out.name.endswith((".tif", ".tiff"))):
+        raise SsdpcError(f"output {out.name}: give a .ome.tif (one frame) or a .zarr (time series) path")
+    distributed = args.workers is not None or args.scheduler is not None
+    if distributed and not is_zarr:
+        raise SsdpcError("--workers/--scheduler spread the frames of a time series; write it to OME-Zarr (-o OUT.zarr)")
+    cal = Calibration.from_json(args.calibration)
+    if args.optics is not None:
+        optics = _optics(args.optics)
+    elif args.config is None:
+        optics = cal.optics
+    else:
+        optics = None  # the configuration's
+    cfg = run_config(args, optics)
+    optics = cfg.optics
+    checks.check_optics_match(optics, cal, "--optics" if args.optics else "--config" if args.config else "calibration")
+    stacks = any(outputs.QUANTITIES[s].needs_stacks for s in save)
+    checks.check_memory(optics, cal, cfg.reconstruction, stacks)
+    source = FrameSource(args.raw) if is_zarr else None  # a series streams, frame by frame
+    frames = None if is_zarr else read_frame(args.raw)
+    if frames is not None and frames.ndim == 3 and len(frames) > 1:
+        raise SsdpcError(f"{args.raw} holds {len(frames)} frames; write a time series to OME-Zarr (-o OUT.zarr)")
+    flat = read_frame(args.flat, allow_series=False, name="flat frame") if args.flat else None
+    if flat is not None:
+        checks.check_flat(flat, optics, cal)
+    recipe = Recipe(optics, cal, dict(settings=cfg.reconstruction, stacks=stacks), flat)
+    meta = {
+        "software": f"napari-ssdpc {__version__}",
+        "optics": optics.to_dict(),
+        "calibration": {k: v for k, v in cal.to_dict().items() if k != "lenslets"},
+    }
+    rec = None
+    if not distributed:
+        with tqdm_callback("building operators", unit="plane") as cb:
+            rec = recipe.build(progress=cb)
+        meta["settings"] = rec.settings()
+    if is_zarr:
+        if rec is not None:
+            checks.check_frame_light(source[0], rec, name=f"{args.raw} frame 0")
+        _reconstruct_series(source, recipe, rec, out, save, meta, args)
+        return
+    frame = frames if frames.ndim == 2 else frames[0]
+    checks.check_frame_light(frame, rec, name=str(args.raw))
+    with tqdm_callback("reconstructing", unit="iteration") as cb:
+        result = rec.reconstruct(frame, progress=cb)
+    checks.check_result(result.delta_n, optics)
+    voxel = (rec.dz, *result.voxel_um[1:])  # dz of the settings, also for a single plane
+    images = outputs.images(result, save)
+    write_ome_tiffs(
+        {
+            paths[name]: (data, axes, voxel, {**meta, "quantity": what, "z_um": result.z_um.tolist()})
+            for name, (data, axes, what) in images.items()
+        }
+    )
+    print(f"wrote {', '.join(str(paths[n]) for n in images)}")
+    dn = result.delta_n
+    print(
+        f"volume {dn.shape} (z, y, x), voxel {voxel[0]:g} x {voxel[1]:.4f} x {voxel[2]:.4f} µm; "
+        f"delta n from {dn.min():+.4f} to {dn.max():+.4f}"
+    )
+
+
+def _reconstruct_series(source, recipe, rec, out, save, meta, args):
+    """Frames streamed into (t, z, y, x) OME-Zarr images, one chunk per frame; resumable; on a
+    Dask cluster with --workers/--scheduler (io/series.py)."""
+    from napari_ssdpc.io.series import reconstruct_series
+
+    report = reconstruct_series(
+        source, out, recipe, save=save, meta=meta, workers=args.workers, scheduler=args.scheduler, rec=rec
+    )
+    names = ", ".join(["ri", *save])
+    if report.written == 0:
+        print(f"{out}: all {report.frames} frames were already written ({names})")
+        return
+    print(
+        f"wrote {out} ({report.written} of {report.frames} frames, {report.skipped} done before: {names}; "
+        f"{report.frames_per_second:.2f} frames/s)"
+    )
+
+
+def cmd_bench(args):
+    from napari_ssdpc.validation.bench import format_report, run_bench
+
+    if args.cache is not None:
+        cache = Path(args.cache)
+        if cache.exists() and not cache.is_dir():
+            raise SsdpcError(f"--cache {cache} is a file; give a folder")
+        writable_folder(cache if cache.exists() else cache.parent, "--cache folder")
+    report = run_bench(
+        quick=args.quick,
+        device=args.device,
+        cache_dir=args.cache,
+        reference=not args.no_reference,
+        log=None if args.json else (lambda m: print(m, file=sys.stderr, flush=True)),
+    )
+    print(json.dumps(report, indent=2) if args.json else format_report(report))
+
+
+def cmd_demo(args):
+    from napari_ssdpc.validation.demo import run_demo
+
+    out = Path(args.output)
+    check_outputs({"demo folder": out}, {"optics file": args.optics}, folders=["demo folder"])
+    if out.exists() and not out.is_dir():
+        raise SsdpcError(f"demo folder {out} is a file; give a new folder name")
+    if out.is_dir():
+        writable_folder(out, "demo folder")
+    run_demo(out, optics=None if args.optics is None else _optics(args.optics), seed=args.seed)

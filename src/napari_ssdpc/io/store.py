@@ -1,0 +1,249 @@
+"""The OME-Zarr store of a time series: creation, stamp, lock, resume, completeness.
+
+- A new store is built in a hidden folder beside the target (``.OUT.PID.new``) with all its
+  metadata, its stamp and its ``ssdpc_done`` array, and renamed into place: a kill during
+  creation leaves only that hidden folder, which the next run removes.
+- The stamp names what the store holds: the input's identity (path, size, modification time
+  and SHA-256 of its content), the frame count and shape, the recipe and the outputs. A rerun
+  resumes only the same job, and refuses a changed input naming both recordings.
+- One writer at a time: ``.OUT.lock`` beside the store holds the writer's PID; a lock left by a
+  process that no longer runs is taken over.
+- A frame is complete when its byte in ``ssdpc_done`` is 1 (set after all its chunks);
+  :func:`read_complete` shows the other frames as NaN.
+- A folder that is not a store of ours is refused before anything is written into it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.files import glob_escape, os_error, pid_alive
+
+__all__ = ["DONE", "STAMP", "StoreLock", "done_frames", "open_store", "read_complete"]
+
+DONE = "ssdpc_done"  # root array: 1 where a frame is completely written
+STAMP = "ssdpc_series"  # root attribute: what the store holds (input, settings, outputs)
+_METADATA = {".zgroup", ".zattrs", ".zarray", "zarr.json"}
+
+
+class StoreLock:
+    """``.OUT.lock`` beside a store, holding the writer's PID; a context manager.
+
+    Parameters
+    ----------
+    out : str or Path
+        The store.
+    """
+
+    def __init__(self, out):
+        out = Path(out)
+        self.path = out.parent / f".{out.name}.lock"
+        self.out = out
+
+    def __enter__(self) -> StoreLock:
+        for _ in range(3):
+            try:
+                fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+            except FileExistsError:
+                pid = self._owner()
+                if pid is not None and pid != os.getpid() and pid_alive(pid):
+                    raise SsdpcError(
+                        f"{self.out} is being written by process {pid}; wait for it to finish, or stop it "
+                        "and rerun to resume"
+                    ) from None
+                with contextlib.suppress(FileNotFoundError):  # a stale lock of a dead process: take it over
+                    self.path.unlink()
+                continue
+            except OSError as e:
+                raise os_error(e, self.out, "locking") from None
+            with os.fdopen(fd, "w") as f:
+                f.write(str(os.getpid()))
+            return self
+        raise SsdpcError(f"{self.out}: cannot take the lock {self.path}; remove it if no run is writing the store")
+
+    def _owner(self) -> int | None:
+        try:
+            return int(self.path.read_text().strip() or 0)
+        except (OSError, ValueError):
+            return None
+
+    def __exit__(self, *exc) -> None:
+        if self._owner() == os.getpid():
+            with contextlib.suppress(OSError):
+                self.path.unlink()
+
+
+def _describe_input(ident) -> str:
+    if not isinstance(ident, dict):
+        return f"{ident} (no content hash)"
+    when = ""
+    if ident.get("mtime_ns"):
+        when = ", modified " + datetime.datetime.fromtimestamp(ident["mtime_ns"] / 1e9).isoformat(timespec="seconds")
+    size = f", {ident['size']} bytes" if ident.get("size") is not None else ""
+    return (
+        f"{ident.get('path')} ({ident.get('frames', '?')} frames{size}{when}, sha256 {ident.get('sha256', '?')[:12]})"
+    )
+
+
+def _read_stamp(out: Path):
+    """The stamp of an existing store, or None when the folder holds no store of ours."""
+    import zarr
+
+    try:
+        return zarr.open_group(str(out), mode="r").attrs.get(STAMP)
+    except Exception:  # not a zarr group at all
+        return None
+
+
+def _killed_creation(out: Path) -> bool:
+    """Only zarr metadata and temporary chunk files: a store whose creation was killed."""
+    return all(p.is_file() and (p.name in _METADATA or p.name.endswith(".partial")) for p in out.iterdir())
+
+
+def _check_resume(out: Path, old: dict, stamp: dict) -> None:
+    new_in, old_in = stamp["input"], old.get("input")
+    same = isinstance(old_in, dict) and old_in.get("sha256") == new_in.get("sha256")
+    if not same:
+        raise SsdpcError(
+            f"{out} holds frames of another recording: it was made from {_describe_input(old_in)}, the input is "
+            f"now {_describe_input(new_in)}; write to a new output path, or delete {out} to start over"
+        )
+    rest = {k: v for k, v in stamp.items() if k != "input"}
+    if {k: old.get(k) for k in rest} != rest:
+        raise SsdpcError(
+            f"{out} holds a reconstruction with other settings or outputs; choose a new output path or delete "
+            "the old one to start over"
+        )
+
+
+def _create(out: Path, n_frames, layout, voxel, stamp: dict, attrs: dict) -> None:
+    """Build the complete empty store in a hidden folder and rename it into place."""
+    import zarr
+
+    from napari_ssdpc.io.frames import create_ome_zarr
+
+    for old in out.parent.glob(f".{glob_escape(out.name)}.*.new"):  # left by a killed creation
+        pid = old.name[len(out.name) + 2 : -len(".new")]
+        if pid.isdigit() and not pid_alive(int(pid)):
+            shutil.rmtree(old, ignore_errors=True)
+    tmp = out.parent / f".{out.name}.{os.getpid()}.new"
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        root = zarr.open_group(str(tmp), mode="w", zarr_format=2)
+        root.attrs[STAMP] = stamp
+        for name, (shape, axes, what) in layout.items():
+            create_ome_zarr(tmp, name, (n_frames,) + tuple(shape), "T" + axes, voxel, attrs={**attrs, "quantity": what})
+        root.create_array(DONE, shape=(n_frames,), chunks=(1,), dtype="uint8", fill_value=0)
+        if out.exists():  # an empty folder, or one left by a killed creation
+            for p in out.iterdir():
+                p.unlink()
+        os.replace(tmp, out)
+    except OSError as e:
+        raise os_error(e, out, "creating") from None
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def open_store(out, n_frames: int, layout: dict, voxel, stamp: dict, attrs: dict):
+    """Create the store, or reopen it to resume the same job. Returns the done-flags array.
+
+    Parameters
+    ----------
+    out : str or Path
+        The ``.zarr`` folder.
+    n_frames : int
+        Frames of the series.
+    layout : dict
+        ``{name: (shape per frame, axes, description)}`` (``outputs.layout``).
+    voxel : tuple of float
+        (dz, dy, dx), µm.
+    stamp : dict
+        What the store holds; its ``input`` is the input's identity (path, size, mtime_ns, sha256).
+    attrs : dict
+        Metadata stored with every image group.
+
+    Returns
+    -------
+    zarr.Array
+        ``ssdpc_done``: 1 where a frame is complete.
+    """
+    import zarr
+
+    from napari_ssdpc.io.frames import create_ome_zarr
+
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise SsdpcError(f"{out} exists and is a file, not an OME-Zarr folder; choose a new output path")
+    old = _read_stamp(out) if out.exists() else None
+    if old is None:
+        if out.exists() and any(out.iterdir()) and not _killed_creation(out):
+            raise SsdpcError(f"{out} exists and was not written by `ssdpc reconstruct`; choose a new output path")
+        _create(out, n_frames, layout, voxel, stamp, attrs)
+    else:
+        _check_resume(out, old, stamp)
+    root = zarr.open_group(str(out), mode="r+", zarr_format=2)
+    try:
+        for name, (shape, axes, _) in layout.items():
+            if not (name in root and "0" in root[name]):  # a store of an older version, half made
+                create_ome_zarr(out, name, (n_frames,) + tuple(shape), "T" + axes, voxel, overwrite=True)
+        if DONE not in root:
+            root.create_array(DONE, shape=(n_frames,), chunks=(1,), dtype="uint8", fill_value=0)
+        for p in out.rglob("*.partial"):  # a temporary chunk file of a killed run
+            p.unlink(missing_ok=True)
+    except OSError as e:
+        raise os_error(e, out) from None
+    return root[DONE]
+
+
+def done_frames(out) -> np.ndarray:
+    """Indices of the frames completely written to a series store.
+
+    Parameters
+    ----------
+    out : str or Path
+
+    Returns
+    -------
+    numpy.ndarray of int
+    """
+    import zarr
+
+    root = zarr.open_group(str(out), mode="r")
+    if DONE not in root:
+        return np.zeros(0, int)
+    return np.flatnonzero(root[DONE][:] == 1)
+
+
+def read_complete(out, name: str = "ri") -> np.ndarray:
+    """One image of a series store with every frame not marked done shown as NaN.
+
+    A frame killed between its chunks may hold RI without phase; the done marker is set only
+    after all its chunks, so a reader that trusts it never shows a half frame.
+
+    Parameters
+    ----------
+    out : str or Path
+        The store.
+    name : str
+        The image ('ri', 'phase', ...).
+
+    Returns
+    -------
+    numpy.ndarray
+        (t, ...) float32.
+    """
+    from napari_ssdpc.io.frames import read_ome_zarr
+
+    arr, _, _ = read_ome_zarr(out, name)
+    data = np.array(arr[:], dtype=np.float32)
+    done = np.zeros(len(data), bool)
+    done[done_frames(out)] = True
+    data[~done] = np.nan
+    return data

@@ -1,0 +1,200 @@
+"""Series stores: identity stamp, lock, killed creation, a fault at every write, completeness.
+
+A small stand-in Reconstructor (8 x 8 volumes) keeps these tests fast; the real one is tested
+in test_series.py.
+"""
+
+import errno
+import hashlib
+import os
+import subprocess
+import sys
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import zarr.storage._local as zlocal
+
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.io.frames import read_ome_zarr
+from napari_ssdpc.io.series import FrameSource, Recipe, reconstruct_series
+from napari_ssdpc.io.store import StoreLock, done_frames, read_complete
+
+
+class FakeRec:
+    """The part of a Reconstructor that reconstruct_series uses: Δn = frame mean / 1e6."""
+
+    z_um = np.array([0.0, 1.0])
+    mask = np.ones((8, 8), bool)
+    dz, pixel_um, build_seconds = 1.0, 0.5, 0.0
+
+    def settings(self):
+        return {"dz_um": 1.0}
+
+    def reconstruct(self, frame):
+        v = np.full((2, 8, 8), float(np.mean(frame)) / 1e6, np.float32)
+        return SimpleNamespace(ri=1.5 + v, phase=v, timings={})
+
+
+@pytest.fixture(scope="module")
+def setup(synthetic_series):
+    optics, cal, flat, frames, _ = synthetic_series
+    return Recipe(optics, cal, {"dz": 1.0}, None), frames[:3]
+
+
+def run(recipe, frames, out, **kw):
+    return reconstruct_series(frames, out, recipe, rec=FakeRec(), save=["phase"], progress=False, **kw)
+
+
+def tree_sha(folder):
+    h = hashlib.sha256()
+    for p in sorted(folder.rglob("*")):
+        h.update(str(p.relative_to(folder)).encode())
+        if p.is_file():
+            h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+def dead_pid():
+    p = subprocess.Popen([sys.executable, "-c", "pass"])
+    p.wait()
+    return p.pid
+
+
+def test_a_changed_input_is_refused_naming_both_recordings(setup, tmp_path):
+    recipe, frames = setup
+    out = tmp_path / "s.zarr"
+    run(recipe, frames, out, stop_after=2)
+    before = tree_sha(out)
+    other = frames.copy()
+    other[2] += 1  # a new recording: only a frame not yet read differs
+    with pytest.raises(SsdpcError, match=r"another recording: it was made from array \(3 frames.*sha256 \w{12}\)"):
+        run(recipe, other, out)
+    assert tree_sha(out) == before
+    run(recipe, frames, out)  # the same recording resumes
+    assert list(done_frames(out)) == [0, 1, 2]
+
+
+def test_a_changed_file_is_refused_and_a_touched_one_resumes(setup, tmp_path):
+    import tifffile
+
+    recipe, frames = setup
+    src, out = tmp_path / "in.tif", tmp_path / "s.zarr"
+    tifffile.imwrite(src, frames, photometric="minisblack")
+    run(recipe, FrameSource(src), out, stop_after=1)
+    os.utime(src)  # touched, same content
+    run(recipe, FrameSource(src), out, stop_after=1)
+    tifffile.imwrite(src, frames[::-1], photometric="minisblack")
+    with pytest.raises(SsdpcError, match=f"another recording.*{src.name}.*bytes, modified"):
+        run(recipe, FrameSource(src), out)
+    assert list(done_frames(out)) == [0, 1]
+
+
+@pytest.mark.parametrize("nth", range(1, 40, 3))
+def test_a_fault_at_every_store_write_leaves_done_frames_right_and_a_rerun_completes(setup, tmp_path, monkeypatch, nth):
+    """A full disk at the n-th file write (metadata, chunks, done marks): a one-line error, every
+    frame marked done holds its right values, and a rerun completes the store."""
+    recipe, frames = setup
+    ref = tmp_path / "ref.zarr"
+    run(recipe, frames, ref)
+    out = tmp_path / "s.zarr"
+    real, calls = zlocal._put, {"n": 0}
+
+    def put(path, value, *a, **k):
+        calls["n"] += 1
+        if calls["n"] == nth:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(path, value, *a, **k)
+
+    monkeypatch.setattr(zlocal, "_put", put)
+    try:
+        run(recipe, frames, out)
+        failed = False
+    except SsdpcError as e:
+        assert "no space left" in str(e) and "\n" not in str(e)
+        failed = True
+    monkeypatch.undo()
+    assert failed or calls["n"] < nth
+    if out.exists():
+        for name in ("ri", "phase"):
+            got, want = read_complete(out, name), read_ome_zarr(ref, name)[0][:]
+            for t in done_frames(out):
+                np.testing.assert_array_equal(got[t], want[t])
+    run(recipe, frames, out)
+    for name in ("ri", "phase"):
+        np.testing.assert_array_equal(read_ome_zarr(out, name)[0][:], read_ome_zarr(ref, name)[0][:])
+    assert not list(tmp_path.glob(".s.zarr*")) and not list(out.rglob("*.partial"))
+
+
+def test_a_killed_first_metadata_write_does_not_block_reruns(setup, tmp_path):
+    recipe, frames = setup
+    out = tmp_path / "s.zarr"
+    out.mkdir()
+    (out / ".zgroup").write_text('{"zarr_format": 2}')
+    (out / ".zattrs.3f2a.partial").write_text('{"ssdpc')  # zarr's temporary file, killed
+    stale = tmp_path / f".s.zarr.{dead_pid()}.new"  # a creation killed before its rename
+    stale.mkdir()
+    (stale / ".zgroup").write_text("{}")
+    run(recipe, frames, out)
+    assert list(done_frames(out)) == [0, 1, 2] and not stale.exists()
+    assert not list(out.rglob("*.partial"))
+
+
+def test_a_foreign_folder_or_file_is_refused_untouched(setup, tmp_path):
+    recipe, frames = setup
+    foreign = tmp_path / "other.zarr"
+    foreign.mkdir()
+    (foreign / "data.txt").write_text("another program's data")
+    before = tree_sha(foreign)
+    with pytest.raises(SsdpcError, match="not written by `ssdpc reconstruct`"):
+        run(recipe, frames, foreign)
+    assert tree_sha(foreign) == before and sorted(p.name for p in foreign.iterdir()) == ["data.txt"]
+    afile = tmp_path / "x.zarr"
+    afile.write_bytes(b"a file")
+    with pytest.raises(SsdpcError, match="is a file, not an OME-Zarr folder"):
+        run(recipe, frames, afile)
+    assert afile.read_bytes() == b"a file"
+
+
+def test_one_writer_per_store_and_a_stale_lock_is_taken_over(setup, tmp_path):
+    recipe, frames = setup
+    out = tmp_path / "s.zarr"
+    lock = tmp_path / ".s.zarr.lock"
+    lock.write_text(str(os.getppid()))  # a live writer
+    with pytest.raises(SsdpcError, match=f"being written by process {os.getppid()}"):
+        run(recipe, frames, out)
+    assert not out.exists()
+    lock.write_text(str(dead_pid()))  # a writer that was killed
+    run(recipe, frames, out)
+    assert list(done_frames(out)) == [0, 1, 2] and not lock.exists()
+    with StoreLock(out):
+        assert lock.read_text() == str(os.getpid())
+    assert not lock.exists()
+
+
+def test_the_reader_shows_frames_not_marked_done_as_nan(setup, tmp_path):
+    import zarr
+
+    recipe, frames = setup
+    out = tmp_path / "s.zarr"
+    run(recipe, frames, out)
+    root = zarr.open_group(str(out), mode="r+")
+    root["ssdpc_done"][1] = 0  # as if killed between frame 1's chunks
+    ri = read_complete(out, "ri")
+    assert np.isnan(ri[1]).all() and np.isfinite(ri[[0, 2]]).all()
+
+
+@pytest.mark.parametrize("value, words", [(np.nan, "NaN/inf"), (9e12, "beyond any sample")])
+def test_an_unphysical_frame_is_not_written(setup, tmp_path, value, words):
+    recipe, frames = setup
+
+    class Bad(FakeRec):
+        def reconstruct(self, frame):
+            r = super().reconstruct(frame)
+            r.ri[0, 0, 0] = value
+            return r
+
+    out = tmp_path / "s.zarr"
+    with pytest.raises(SsdpcError, match=f"frame 0: .*{words}"):
+        reconstruct_series(frames, out, recipe, rec=Bad(), progress=False)
+    assert list(done_frames(out)) == [] and np.isnan(read_complete(out, "ri")).all()
