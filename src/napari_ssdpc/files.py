@@ -78,7 +78,7 @@ def os_error(e: OSError, path: str | Path, doing: str = "writing") -> SsdpcError
         errno.EEXIST: "it already exists; choose another path",
         errno.ENAMETOOLONG: "the name is too long; choose a shorter path",
     }
-    fix = fixes.get(e.errno, f"{e.strerror or type(e).__name__}; check the path and the disk")
+    fix = fixes.get(e.errno, f"{e.strerror or e or type(e).__name__}; check the path and the disk")
     return SsdpcError(f"{doing} {path}: {fix}")
 
 

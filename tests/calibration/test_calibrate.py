@@ -287,7 +287,7 @@ def test_json_write_failure_keeps_the_old_file(white, tmp_path, monkeypatch):
         raise OSError("disk full")
 
     monkeypatch.setattr(pathlib.Path, "write_text", half_write)
-    with pytest.raises(OSError):
+    with pytest.raises(SsdpcError, match="disk full; check the path and the disk"):
         cal.to_json(path)
     monkeypatch.undo()
     assert path.read_bytes() == before
