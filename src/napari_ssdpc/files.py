@@ -111,7 +111,18 @@ def clean_stale_parts(path: str | Path) -> list[Path]:
 
 
 def glob_escape(name: str) -> str:
-    """``name`` with the glob special characters escaped."""
+    """``name`` with the glob special characters escaped.
+
+    Parameters
+    ----------
+    name : str
+        A file name.
+
+    Returns
+    -------
+    str
+        A glob pattern that matches exactly ``name``.
+    """
     return re.sub(r"([\[\]*?])", r"[\1]", name)
 
 

@@ -10,7 +10,21 @@ from tqdm.auto import tqdm
 
 @contextlib.contextmanager
 def tqdm_callback(desc: str, unit: str = "step"):
-    """A ``progress(done, total)`` callable that drives a tqdm bar on stderr."""
+    """A ``progress(done, total)`` callable that drives a tqdm bar on stderr.
+
+    Parameters
+    ----------
+    desc : str
+        The bar's label.
+    unit : str
+        What one step is ("plane", "frame", "iteration").
+
+    Yields
+    ------
+    callable
+        ``update(done, total, *extra)``: sets the bar to ``done`` of ``total``. On a terminal the
+        bar redraws every 0.5 s; in a log file every 10 s.
+    """
     tty = sys.stderr.isatty()
     # in a log file, a line every 10 s is enough
     bar = tqdm(desc=desc, unit=unit, file=sys.stderr, leave=False, dynamic_ncols=True, mininterval=0.5 if tty else 10)

@@ -42,6 +42,13 @@ def _optics(path):
 
 
 def cmd_design(args):
+    """Print the design calculator's table (or JSON) for the optics.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed options of `ssdpc design` (see ``ssdpc design --help``).
+    """
     from napari_ssdpc.physics.design import design, design_table
 
     optics = _optics(args.optics)
@@ -49,6 +56,13 @@ def cmd_design(args):
 
 
 def cmd_calibrate(args):
+    """Calibrate the lattice from a white (or sample) frame; write the JSON and the overlay PNG.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed options of `ssdpc calibrate` (see ``ssdpc calibrate --help``).
+    """
     from napari_ssdpc.calibration.calibrate import calibrate, overlay_png
     from napari_ssdpc.io.frames import read_frame
 
@@ -133,6 +147,13 @@ def _check_simulate_numbers(args, optics):
 
 
 def cmd_simulate(args):
+    """Simulate raw frames of a phantom (and the flat and white frames) with the multislice model.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed options of `ssdpc simulate` (see ``ssdpc simulate --help``).
+    """
     from napari_ssdpc.io.frames import write_tiffs
     from napari_ssdpc.physics.lattice import Grid
     from napari_ssdpc.progress import tqdm_callback
@@ -183,6 +204,13 @@ def output_paths(out: Path, names) -> dict:
 
 
 def cmd_reconstruct(args):
+    """Reconstruct one frame or a series to RI volumes (OME-TIFF, or a resumable OME-Zarr store).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed options of `ssdpc reconstruct` (see ``ssdpc reconstruct --help``).
+    """
     from napari_ssdpc.calibration.calibrate import Calibration
     from napari_ssdpc.io.frames import read_frame, write_ome_tiffs
     from napari_ssdpc.io.series import FrameSource, Recipe
@@ -286,6 +314,13 @@ def _reconstruct_series(source, recipe, rec, out, save, meta, args):
 
 
 def cmd_bench(args):
+    """Run the speed benchmark and print its report.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed options of `ssdpc bench` (see ``ssdpc bench --help``).
+    """
     from napari_ssdpc.validation.bench import format_report, run_bench
 
     if args.cache is not None:
@@ -304,6 +339,13 @@ def cmd_bench(args):
 
 
 def cmd_demo(args):
+    """Simulate, calibrate and reconstruct a bead end to end; write the summary figure.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed options of `ssdpc demo` (see ``ssdpc demo --help``).
+    """
     from napari_ssdpc.validation.demo import run_demo
 
     out = Path(args.output)

@@ -42,6 +42,13 @@ class _Parser(argparse.ArgumentParser):
 
 # ------------------------------------------------------------------------- parser
 def build_parser():
+    """The `ssdpc` argument parser with its sub-commands.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        Errors print one line with the fix and exit with status 2.
+    """
     p = _Parser(
         prog="ssdpc",
         description="Single-shot 3D quantitative phase imaging with a Fourier light-field microscope (ssDPC).",
@@ -120,6 +127,18 @@ def _warning_line(message, category, filename, lineno, file=None, line=None):
 
 
 def main(argv=None) -> int:
+    """Run `ssdpc`: every known fault ends in one line on stderr, never a traceback.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments (default: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        0 on success, 2 on an error, 130 when interrupted.
+    """
     args = build_parser().parse_args(argv)
     warnings.showwarning = _warning_line
     warnings.simplefilter("always", SsdpcWarning)

@@ -122,7 +122,17 @@ def design_warnings(optics: Optics) -> list[str]:
 
 
 def design_table(optics: Optics) -> str:
-    """Readable design summary for ``ssdpc design``."""
+    """Readable design summary for ``ssdpc design`` and the napari Optics step.
+
+    Parameters
+    ----------
+    optics : Optics
+
+    Returns
+    -------
+    str
+        One row per quantity with its value and unit, then the design warnings.
+    """
     d = design(optics)
     rows = [
         ("Elemental-image magnification M_EI", f"{d['m_ei']:.4g}", "x"),

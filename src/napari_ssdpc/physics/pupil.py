@@ -23,7 +23,22 @@ __all__ = ["axial_frequency", "eta", "mean_tilt", "soft_disk", "subaperture_pupi
 
 def soft_disk(dist, radius, step):
     """Disk sampled with an antialiased edge: a linear ramp one sample wide, so that the sampled
-    amplitude integrates to the disk area to second order in the step."""
+    amplitude integrates to the disk area to second order in the step.
+
+    Parameters
+    ----------
+    dist : array_like
+        Distance of each sample from the disk's centre (any unit).
+    radius : float
+        The disk's radius, same unit.
+    step : float
+        The sampling step, same unit.
+
+    Returns
+    -------
+    ndarray
+        Values in [0, 1], shaped like ``dist``.
+    """
     return np.clip(0.5 + (radius - np.asarray(dist)) / step, 0.0, 1.0)
 
 
@@ -67,7 +82,24 @@ def axial_frequency(ux, uy, optics: Optics) -> np.ndarray:
 def subaperture_pupil(optics: Optics, u_k, shape, du):
     """P_k = P_obj·circ(|u − u_k| ≤ ρ) on the grid u = u_k + fftfreq (unshifted FFT order).
 
-    Returns (P, ux, uy) with ux, uy the absolute frequencies (broadcastable to ``shape``).
+    The lenslet's sub-aperture of the objective pupil (paper Eq. 2), sampled around its centre.
+
+    Parameters
+    ----------
+    optics : Optics
+    u_k : array_like, shape (2,)
+        The sub-aperture's centre (x, y), cycles/µm.
+    shape : tuple of int
+        (ny, nx) samples.
+    du : float or array_like, shape (2,)
+        Frequency step, cycles/µm: one for both axes or (du_y, du_x).
+
+    Returns
+    -------
+    P : ndarray, shape (ny, nx)
+        The pupil amplitude in [0, 1].
+    ux, uy : ndarray
+        The absolute frequencies, cycles/µm, broadcastable to ``shape``.
     """
     ny, nx = shape
     d = np.broadcast_to(np.asarray(du, dtype=float), (2,))  # a scalar step or (du_y, du_x)
@@ -82,7 +114,21 @@ def subaperture_pupil(optics: Optics, u_k, shape, du):
 
 
 def mean_tilt(optics: Optics, pupil, ux, uy) -> np.ndarray:
-    """<u/η(u)> weighted by |P|² (x, y): a point at depth z is displaced by z times this."""
+    """<u/η(u)> weighted by |P|²: a point at depth z appears displaced by z times this (parallax).
+
+    Parameters
+    ----------
+    optics : Optics
+    pupil : ndarray
+        The sub-aperture pupil amplitude (from :func:`subaperture_pupil`).
+    ux, uy : ndarray
+        Its absolute frequencies, cycles/µm.
+
+    Returns
+    -------
+    ndarray, shape (2,)
+        tan θ (x, y), dimensionless: µm of lateral shift per µm of depth.
+    """
     w = np.abs(pupil) ** 2
     eta = axial_frequency(ux, uy, optics)
     total = w.sum()

@@ -42,7 +42,20 @@ def bounded(default: Any, lo: float, hi: float, description: str, **kw: Any) -> 
 
 
 def field_range(model: type[BaseModel], name: str) -> tuple[float, float]:
-    """(lo, hi) of a field declared with :func:`bounded`: the one place the ranges live."""
+    """(lo, hi) of a field declared with :func:`bounded`: the one place the ranges live.
+
+    Parameters
+    ----------
+    model : type of pydantic.BaseModel
+        The settings model.
+    name : str
+        The field's name.
+
+    Returns
+    -------
+    tuple of float
+        The inclusive bounds; ±inf where the field has none.
+    """
     lo, hi = -math.inf, math.inf
     for m in model.model_fields[name].metadata:
         lo = float(getattr(m, "ge", lo) if getattr(m, "ge", None) is not None else lo)
@@ -117,7 +130,22 @@ _KIND = {"float": "a number", "int": "a whole number", "bool": "true or false", 
 
 
 def one_line(error: ValidationError, model: type[BaseModel], source: str) -> str:
-    """One message for the first error of a pydantic ValidationError."""
+    """One message for the first error of a pydantic ValidationError.
+
+    Parameters
+    ----------
+    error : pydantic.ValidationError
+        The error raised while validating ``model``.
+    model : type of pydantic.BaseModel
+        The model that was validated (for the nearest valid key and the field's range).
+    source : str
+        Where the values came from (a file name), to start the message.
+
+    Returns
+    -------
+    str
+        ``"SOURCE: key: what is wrong; the fix"`` on one line.
+    """
     errors = error.errors()
     first = errors[0]
     loc = tuple(p for p in first["loc"] if not (isinstance(p, str) and p.startswith("function-")))

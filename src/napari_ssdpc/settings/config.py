@@ -60,7 +60,17 @@ class RunConfig(SettingsModel):
         return cls(optics=optics, reconstruction=rec)
 
     def to_yaml(self, path: str | Path) -> Path:
-        """Write the configuration as YAML (atomically); returns the path."""
+        """Write the configuration as YAML (atomically).
+
+        Parameters
+        ----------
+        path : str or Path
+            The YAML file; ``ssdpc reconstruct --config`` and the napari dock read it back.
+
+        Returns
+        -------
+        Path
+        """
         from napari_ssdpc.files import atomic_write
 
         path = Path(path)

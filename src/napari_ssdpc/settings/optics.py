@@ -216,7 +216,22 @@ class Optics(SettingsModel):
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> Optics:
-        """Read an optics YAML file, or the ``optics:`` section of a run configuration."""
+        """Read an optics YAML file, or the ``optics:`` section of a run configuration.
+
+        Parameters
+        ----------
+        path : str or Path
+            The YAML file (lengths carry their unit in the key, e.g. ``pitch_um``).
+
+        Returns
+        -------
+        Optics
+
+        Raises
+        ------
+        SsdpcError
+            One line naming the key, the value and the fix.
+        """
         data = read_mapping(path, "optics file")
         if "optics" in data and isinstance(data["optics"], dict):
             data = data["optics"]
@@ -234,9 +249,24 @@ class Optics(SettingsModel):
             del d["iris_radius_um"]
         return d
 
-    def to_yaml(self, path: str | Path) -> None:
-        """Write the optics YAML file."""
-        Path(path).write_text(yaml.safe_dump(self.to_dict(), sort_keys=False), encoding="utf-8")
+    def to_yaml(self, path: str | Path) -> Path:
+        """Write the optics YAML file (atomically: a failed write leaves the old file).
+
+        Parameters
+        ----------
+        path : str or Path
+            The YAML file; :meth:`from_yaml` reads it back.
+
+        Returns
+        -------
+        Path
+        """
+        from napari_ssdpc.files import atomic_write
+
+        path = Path(path)
+        with atomic_write(path) as tmp:
+            tmp.write_text(yaml.safe_dump(self.to_dict(), sort_keys=False), encoding="utf-8")
+        return path
 
     def replace(self, **changes: Any) -> Optics:
         """A validated copy with some fields changed; parts' fields may be named flat (``na=0.3``)."""
