@@ -78,7 +78,7 @@ def os_error(e: OSError, path: str | Path, doing: str = "writing") -> SsdpcError
         errno.EEXIST: "it already exists; choose another path",
         errno.ENAMETOOLONG: "the name is too long; choose a shorter path",
     }
-    fix = fixes.get(e.errno, f"{e.strerror or e or type(e).__name__}; check the path and the disk")
+    fix = fixes.get(e.errno or 0, f"{e.strerror or e or type(e).__name__}; check the path and the disk")
     return SsdpcError(f"{doing} {path}: {fix}")
 
 
@@ -96,7 +96,7 @@ def clean_stale_parts(path: str | Path) -> list[Path]:
         The files removed.
     """
     path = Path(path)
-    removed = []
+    removed: list[Path] = []
     try:
         siblings = list(path.parent.glob(f".{glob_escape(path.name)}.*.part"))
     except OSError:
@@ -200,23 +200,23 @@ def atomic_write_set(paths: Sequence[str | Path]) -> Iterator[list[Path]]:
     SsdpcError
         As :func:`atomic_write`.
     """
-    paths = [Path(p) for p in paths]
-    for p in paths:
+    targets = [Path(p) for p in paths]
+    for p in targets:
         _check_folder(p)
         clean_stale_parts(p)
     temps: list[Path] = []
     try:
-        for p in paths:
+        for p in targets:
             temps.append(_temp_for(p))
         try:
             yield temps
             for t in temps:
                 _finish(t)
-            for t, p in zip(temps, paths):
+            for t, p in zip(temps, targets):
                 os.replace(t, p)
-            _fsync_folders(paths)
+            _fsync_folders(targets)
         except OSError as e:
-            raise os_error(e, paths[0] if len(paths) == 1 else ", ".join(map(str, paths))) from None
+            raise os_error(e, targets[0] if len(targets) == 1 else ", ".join(map(str, targets))) from None
     finally:
         for t in temps:
             with contextlib.suppress(OSError):

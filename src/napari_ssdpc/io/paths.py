@@ -89,7 +89,7 @@ def is_ours(path: str | Path) -> bool:
             import tifffile
 
             with tifffile.TiffFile(path) as tif:
-                text = tif.pages[0].description or ""
+                text = getattr(tif.pages[0], "description", "") or ""
             return "napari-ssdpc" in text
     except Exception:  # unreadable or foreign: not ours
         return False
