@@ -103,6 +103,14 @@ def test_5_frames_without_light_are_refused(synthetic_series, files, sums, cli, 
     assert rc == 2 and words in err and not (tmp_path / "out.ome.tif").exists()
 
 
+def test_5_a_white_frame_given_as_the_raw_frame_is_refused(files, sums, cli, rec_args, tmp_path):
+    args = rec_args(tmp_path / "out.ome.tif")
+    args[1] = files / "white.tif"
+    rc, err = cli(args)
+    assert rc == 2 and "as on a white frame" in err and "not the white frame" in err
+    assert not (tmp_path / "out.ome.tif").exists()
+
+
 def test_5_blank_and_white_flats_are_refused(synthetic_series, files, sums, cli, rec_args, tmp_path):
     optics, cal, flat, _, white = synthetic_series
     blank = tmp_path / "blank.tif"

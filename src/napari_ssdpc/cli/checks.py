@@ -207,13 +207,21 @@ def check_flat(flat, optics, cal) -> None:
             f"{name}: no light in the elemental images (brightest {top:.3g} above the dark level, noise {noise:.3g}); "
             "record the flat with the lamp on, the condenser at the raw frames' NA and no sample"
         )
+    _white(levels, top, optics, name, "record the flat at the condenser NA of the raw frames")
+
+
+def _white(levels, top: float, optics, name: str, fix: str) -> None:
+    """Refuse a frame whose lenslets are evenly lit although the condenser NA lights only a few.
+
+    With the condenser fully open (a white frame, for calibration) every lenslet is lit; at a
+    condenser NA with sigma < 0.7 most lenslets see only scattered light.
+    """
     lit = float(np.mean(levels >= 0.5 * top))
     expected = min(1.0, float(optics.sigma) ** 2)
     if expected < 0.5 and lit > expected + 0.4:
         raise SsdpcError(
             f"{name}: {100 * lit:.0f}% of the lenslets are evenly lit, as on a white frame (condenser fully open), "
-            f"but the condenser NA {optics.condenser_na:g} lights about {100 * expected:.0f}%; record the flat at the "
-            "condenser NA of the raw frames"
+            f"but the condenser NA {optics.condenser_na:g} lights about {100 * expected:.0f}%; {fix}"
         )
 
 
@@ -239,6 +247,8 @@ def check_frame_light(frame, rec, name: str = "frame") -> None:
     levels, noise = _level_stats(img, cal, estimate_dark(img, cal))
     lit = levels[rec.lit]
     signal = float(np.median(lit))
+    if signal > 5 * noise:
+        _white(levels, signal, rec.optics, name, "give a raw frame recorded at that condenser NA, not the white frame")
     if not signal > 5 * noise:
         raise SsdpcError(
             f"{name}: no light in the directly lit elemental images (median {signal:.3g} above the dark level, "
