@@ -122,10 +122,7 @@ def make_phantom(name, optics, *, n_frames=20):
     if name not in makers:
         raise SsdpcError(f"unknown phantom '{name}'; choose one of {', '.join(PHANTOMS)}")
     ph = makers[name]()
-    first = ph[0] if isinstance(ph, list) else ph
-    if first.medium_index is not None:
-        optics = optics.replace(medium_index=float(first.medium_index))
-    return ph, optics
+    return ph, phantoms.optics_for(ph, optics)
 
 
 def _check_simulate_numbers(args, optics):
