@@ -22,8 +22,18 @@ FLAGS = {
     "model": "model",
     "iterations": "rl_iterations",
     "alpha": "tikhonov_alpha",
+    "sign": "sign",
+    "dn-max": "dn_max",
+    "tv-lambda": "tv_lambda",
+    "tv-iterations": "tv_iterations",
+    "refraction-increment": "refraction_increment_um3_pg",
     "device": "device",
 }
+
+
+def _dest(flag: str) -> str:
+    """The argparse attribute of ``--flag`` ('dn-max' -> 'dn_max')."""
+    return flag.replace("-", "_")
 
 
 def _help(field: str) -> str:
@@ -69,7 +79,8 @@ def run_config(args: argparse.Namespace, optics: Optics | None) -> RunConfig:
     RunConfig
     """
     cfg = RunConfig.from_yaml(args.config) if getattr(args, "config", None) else RunConfig()
-    changes = {name: getattr(args, flag) for flag, name in FLAGS.items() if getattr(args, flag, None) is not None}
+    given = {name: getattr(args, _dest(flag), None) for flag, name in FLAGS.items()}
+    changes = {name: value for name, value in given.items() if value is not None}
     if getattr(args, "z", None) is not None:
         changes.update(z_min_um=float(args.z[0]), z_max_um=float(args.z[1]))
     rec = ReconstructionSettings.from_dict({**cfg.reconstruction.to_dict(), **changes}, source="command line")

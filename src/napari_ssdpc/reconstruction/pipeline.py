@@ -8,13 +8,15 @@ Per frame (paper §2 and §3.2, docs/conventions.md):
    intensity stack I_κ(z);
 3. DPC stacks (Eq. 1) with every slice normalised by the z-summed background of the pair, so
    that a slice holds only its own contrast; absorption from the sum of the four stacks.
-4. Phase, by one of two methods:
+4. Phase, by one of three methods:
+   - 'tv' (default): the views' defocused weak-object transfer functions inverted with total
+     variation, the sign of Δn, a bound and the field stop (:mod:`.regularised`), started from
+     the Tikhonov solution;
+   - 'wotf': 3D Tikhonov over all flat-fielded views with the same operators (:mod:`.wotf`):
+     linear and fastest;
    - 'rl' (the paper's route): Tikhonov phase per slice (Eq. 7) from the DPC stacks with the
-     in-focus DPC transfer function of the chosen model;
-   - 'wotf' (default): 3D Tikhonov over all flat-fielded views with each lenslet's defocused
-     weak-object transfer function (core/phase3d.py). It uses the same physics without the
-     detour through an incoherent-PSF deconvolution; docs/validation.md compares the two.
-   Then Δn = λφ/(2π dz) and n = n_medium + Δn.
+     in-focus DPC transfer function of the chosen model.
+   docs/validation.md compares them. Then Δn = λφ/(2π dz) and n = n_medium + Δn.
 
 Lenslets that receive no direct light at this condenser NA (dark field) carry no first-order
 phase signal (docs/conventions.md) and are left out of the halves.
@@ -32,19 +34,19 @@ import scipy.fft as sfft
 
 from napari_ssdpc.calibration.calibrate import Calibration, extract_views
 from napari_ssdpc.calibration.saturation import warn_saturation
-from napari_ssdpc.errors import SsdpcError, SsdpcWarning
+from napari_ssdpc.errors import Cancelled, SsdpcError, SsdpcWarning
 from napari_ssdpc.physics import transfer
 from napari_ssdpc.physics.design import design
 from napari_ssdpc.physics.psf import LensletPSF
 from napari_ssdpc.reconstruction.backend import get_backend
 from napari_ssdpc.reconstruction.deconvolution import Band, MultiViewRL
-from napari_ssdpc.reconstruction.dpc import dpc_image, phase_to_delta_n, tikhonov_phase
+from napari_ssdpc.reconstruction.dpc import dpc_image, phase_to_delta_n, refractive_index, tikhonov_phase
+from napari_ssdpc.reconstruction.regularised import TvInversion
 from napari_ssdpc.reconstruction.wotf import WotfInversion
-from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.settings.optics import HALVES, PAIRS, Optics
 from napari_ssdpc.settings.reconstruction import DEFAULT_ALPHA, PHASE_METHODS, TRANSFER_MODELS, ReconstructionSettings
 
-HALVES = ("up", "down", "left", "right")
-PAIRS = {"ud": ("up", "down"), "lr": ("left", "right")}
+__all__ = ["Cancelled", "Reconstructor", "Result", "estimate_dark", "z_grid"]
 
 
 def z_grid(z_min_um: float, z_max_um: float, dz_um: float) -> np.ndarray:
@@ -71,10 +73,6 @@ def estimate_dark(frame, calibration: Calibration) -> float:
     return float(np.median(img[yy[far], xx[far]]))
 
 
-class Cancelled(SsdpcError):
-    """The caller asked to stop (``should_stop`` returned True)."""
-
-
 @dataclass
 class Result:
     """Reconstruction of one frame. Arrays are (z, y, x) with coordinates in µm."""
@@ -94,8 +92,25 @@ class Result:
 
     @property
     def voxel_um(self) -> tuple[float, float, float]:
-        dz = float(self.z_um[1] - self.z_um[0]) if len(self.z_um) > 1 else 1.0
+        """(dz, dy, dx) in µm; dz of a single plane is the slab thickness it was made with."""
+        dz = float(self.z_um[1] - self.z_um[0]) if len(self.z_um) > 1 else float(self.settings.get("dz_um", 1.0))
         return dz, float(self.y_um[1] - self.y_um[0]), float(self.x_um[1] - self.x_um[0])
+
+    @property
+    def projected_phase(self) -> np.ndarray:
+        """(y, x) phase summed over the slabs, rad: what a 2D quantitative phase image shows."""
+        return np.sum(self.phase, axis=0, dtype=np.float64).astype(np.float32)
+
+    @property
+    def opd_nm(self) -> np.ndarray:
+        """(y, x) optical path difference Σ_z Δn dz, nm."""
+        return (1e3 * self.voxel_um[0] * np.sum(self.delta_n, axis=0, dtype=np.float64)).astype(np.float32)
+
+    @property
+    def dry_mass(self) -> np.ndarray:
+        """(y, x) dry-mass surface density OPD / α, pg/µm² (α: the specific refraction increment)."""
+        alpha = float(self.settings.get("refraction_increment_um3_pg", 0.19))
+        return (1e-3 * self.opd_nm / alpha).astype(np.float32)
 
 
 class Reconstructor:
@@ -142,6 +157,8 @@ class Reconstructor:
         if not self.alpha > 0:
             raise SsdpcError(f"alpha must be > 0, got {self.alpha}")
         self.with_stacks = bool(stacks) or self.method == "rl"
+        self.tv_settings = {k: rec[k] for k in ("sign", "dn_max", "tv_lambda", "tv_iterations")}
+        self.refraction_increment = float(rec["refraction_increment_um3_pg"])
         self._check_depth_of_field()
         t0 = time.perf_counter()
         self.dark = None if dark is None else float(dark)
@@ -207,7 +224,7 @@ class Reconstructor:
     def _build_operators(self, progress):
         if self.with_stacks:
             self._build_rl(progress)
-        if self.method == "wotf":
+        if self.method in ("wotf", "tv"):
             self.wotf = WotfInversion(
                 self.optics,
                 self.lenslets,
@@ -216,6 +233,17 @@ class Reconstructor:
                 self.z_um,
                 self.alpha,
                 i0=self.level[self.lit],
+            )
+        if self.method == "tv":
+            self.tv = TvInversion(
+                self.optics,
+                self.lenslets,
+                self.mask.shape,
+                self.pixel_um,
+                self.z_um,
+                i0=self.level[self.lit],
+                mask=self.mask,
+                progress=progress,
             )
 
     def _build_rl(self, progress):
@@ -293,11 +321,13 @@ class Reconstructor:
         if self.with_stacks:
             dpc, absorption = self.dpc_from_stacks(stacks)
         t2 = time.perf_counter()
-        phase = self.phase_from(views, dpc)
+        phase, report = self.phase_from(views, dpc, progress=progress, should_stop=should_stop)
         dn = phase_to_delta_n(phase, self.optics.wavelength_um, self.dz)
         t3 = time.perf_counter()
+        if report is not None:
+            history["tv"] = {"objective": report.objective, "relative_change": report.relative_change}
         return Result(
-            ri=(self.optics.medium_index + dn).astype(np.float32),
+            ri=refractive_index(phase, self.optics.wavelength_um, self.dz, self.optics.medium_index),
             delta_n=dn,
             phase=phase.astype(np.float32),
             absorption=absorption,
@@ -308,15 +338,33 @@ class Reconstructor:
             x_um=self.x_um.copy(),
             convergence=history,
             timings={"preprocess_s": t1 - t0, "rl_s": t_rl - t1, "dpc_s": t2 - t_rl, "phase_s": t3 - t2},
-            settings=self.settings(),
+            settings={**self.settings(), **({} if report is None else report.to_dict())},
         )
 
-    def phase_from(self, views, dpc) -> np.ndarray:
-        """Phase per slab (Z, ny, nx) by the chosen method, from the preprocessed views ('wotf')
-        or the DPC stacks ('rl')."""
+    def phase_from(self, views, dpc, progress=None, should_stop=None):
+        """Phase per slab (Z, ny, nx) by the chosen method, from the preprocessed views ('tv',
+        'wotf') or the DPC stacks ('rl'), and the TV solver's report (None for the others)."""
+        if self.method == "rl":
+            h = [self.h_dpc["ud"], self.h_dpc["lr"]]
+            return tikhonov_phase([dpc["ud"], dpc["lr"]], h, self.alpha) * self.mask, None
+        contrast = np.where(self.view_mask, views - 1.0, 0.0)
+        tikhonov = self.wotf.phase(contrast) * self.mask
         if self.method == "wotf":
-            return self.wotf.phase(np.where(self.view_mask, views - 1.0, 0.0)) * self.mask
-        return tikhonov_phase([dpc["ud"], dpc["lr"]], [self.h_dpc["ud"], self.h_dpc["lr"]], self.alpha) * self.mask
+            return tikhonov, None
+        t = self.tv_settings
+        phi, report = self.tv.phase(
+            contrast,
+            warm=tikhonov,
+            sign=t["sign"],
+            phi_max=2 * math.pi * self.dz * t["dn_max"] / self.optics.wavelength_um,  # Δn = λφ/(2π dz)
+            lam=t["tv_lambda"],
+            iterations=t["tv_iterations"],
+            progress=None if progress is None else (lambda i, n, *_: progress(i, n, "TV")),
+            should_stop=should_stop,
+        )
+        if should_stop is not None and should_stop():
+            raise Cancelled("reconstruction cancelled")
+        return phi, report
 
     def dpc_from_stacks(self, stacks):
         """DPC stacks (Eq. 1), each slice normalised by the pair's z-summed intensity, and the
@@ -332,6 +380,7 @@ class Reconstructor:
         return dpc, absorption.astype(np.float32)
 
     def settings(self) -> dict:
+        """The settings this reconstructor was built with, for the output metadata."""
         return {
             "z_min_um": float(self.z_um[0]),
             "z_max_um": float(self.z_um[-1]),
@@ -340,5 +389,7 @@ class Reconstructor:
             "tikhonov_alpha": self.alpha,
             "model": self.model,
             "method": self.method,
+            **({k: v for k, v in self.tv_settings.items()} if self.method == "tv" else {}),
+            "refraction_increment_um3_pg": self.refraction_increment,
             "lenslets_used": [[ln.row, ln.col] for ln in self.lenslets],
         }
