@@ -5,6 +5,8 @@ physics does not reach is an xfail with the measured number, strict so that it i
 it starts to pass.
 """
 
+import os
+
 import numpy as np
 import pytest
 
@@ -16,13 +18,16 @@ pytestmark = pytest.mark.slow
 
 @pytest.fixture(scope="module")
 def cache(tmp_path_factory):
-    return tmp_path_factory.mktemp("validation")
+    """Simulated frames: SSDPC_VALIDATION_CACHE keeps them between runs (same files as
+    docs/compare_methods.py --cache)."""
+    return os.environ.get("SSDPC_VALIDATION_CACHE") or tmp_path_factory.mktemp("validation")
 
 
 @pytest.fixture(scope="module")
 def bead(cache):
     case = val.simulate_case("bead", ph.pmma_bead(), val.paper_optics(), cache_dir=cache)
-    res, _, _ = val.reconstruct_case(case, stacks=False)
+    res, _, _ = val.reconstruct_case(case, stacks=False)  # the default method, 'tv'
+    assert res.settings["method"] == "tv" and res.settings["tv_sign"].startswith("auto: lighter")
     return val.bead_metrics(res, case.phantom, 1.518)
 
 
@@ -30,6 +35,7 @@ def bead(cache):
 def two_beads(cache):
     case = val.simulate_case("two-beads", ph.two_beads(), val.paper_optics(), cache_dir=cache)
     res, _, _ = val.reconstruct_case(case, stacks=False)
+    assert res.settings["tv_sign"].startswith("auto: denser")
     return [val.bead_metrics(res, s, 1.518) for s in case.phantom.spheres], case.phantom.spheres
 
 
@@ -37,18 +43,21 @@ def test_pmma_bead_is_negative_and_in_place(bead):
     assert bead["dn_centre"] < 0 and bead["dn_peak"] < 0
     cx, cy, cz = bead["centroid_um"]
     assert np.hypot(cx, cy) < 1.0  # lateral centroid within 1 µm
-    assert abs(cz) < 5.0  # axial centroid within 5 µm
+    assert abs(cz) < 2.0  # axial centroid within 2 µm (measured +1.7 µm; Tikhonov: +3.1 µm)
 
 
-@pytest.mark.xfail(strict=True, reason="measured lateral FWHM 10.2 µm, 21.5% below 13 µm (target 20%)")
+def test_pmma_bead_peak_is_at_least_half_the_truth(bead):
+    assert bead["dn_peak"] < 0.5 * -0.028  # measured −0.016 (Tikhonov: −0.0075)
+
+
 def test_pmma_bead_lateral_fwhm_within_20_percent(bead):
-    assert bead["fwhm_x_um"] == pytest.approx(13.0, rel=0.2)
+    assert bead["fwhm_x_um"] == pytest.approx(13.0, rel=0.2)  # measured 10.8 µm (Tikhonov 10.2 µm)
     assert bead["fwhm_y_um"] == pytest.approx(13.0, rel=0.2)
 
 
-def test_pmma_bead_axial_fwhm_is_near_the_papers(bead):
-    # the paper measured 21.96 µm; the design calculator predicts 20.7 µm
-    assert 15.0 < bead["fwhm_z_um"] < 30.0
+def test_pmma_bead_axial_fwhm_is_between_the_bead_and_the_papers(bead):
+    # the bead is 13 µm long; the paper measured 21.96 µm; measured 16 µm (Tikhonov 22 µm)
+    assert 13.0 < bead["fwhm_z_um"] < 22.0
 
 
 def test_two_beads_found_at_their_depths(two_beads):
@@ -56,18 +65,17 @@ def test_two_beads_found_at_their_depths(two_beads):
     for m, s in zip(metrics, spheres):
         cx, cy, cz = m["centroid_um"]
         x, y, z = s.center_um
-        assert m["dn_peak"] > 0
-        assert abs(cz - z) < 5.0 and np.sign(cz) == np.sign(z)
+        assert abs(cz - z) < 2.0  # measured 1.2 and 0.7 µm
         assert np.hypot(cx - x, cy - y) < 1.0
-    assert metrics[0]["centroid_um"][2] < 0 < metrics[1]["centroid_um"][2]
+        assert m["dn_peak"] > 0.5 * 0.042  # measured 0.026 and 0.029 (Tikhonov 0.008)
 
 
 def test_cell_correlates_with_the_truth_at_the_system_resolution(cache):
     case = val.simulate_case("cell", ph.cell(), val.paper_optics(), cache_dir=cache)
     res, _, _ = val.reconstruct_case(case, z=(-40, 40), stacks=False)
     m = val.cell_metrics(res, case.phantom, (20.7, 3.9))
-    assert m["correlation_blurred"] > 0.5  # measured 0.565
-    assert abs(m["ri_nucleus"] - m["ri_nucleus_blurred_truth"]) < 0.02  # measured 0.0095
+    assert m["correlation_blurred"] > 0.85  # measured 0.87 (Tikhonov 0.565); the target 0.9 is not reached
+    assert abs(m["ri_nucleus"] - m["ri_nucleus_blurred_truth"]) < 0.01  # measured 0.004
 
 
 def test_bar_target_resolved_at_its_depth(cache):

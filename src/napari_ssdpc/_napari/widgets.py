@@ -90,8 +90,24 @@ class Session:
 _SESSIONS: dict[int, tuple] = {}
 
 
+def real_viewer(viewer):
+    """The viewer behind napari's plugin proxy.
+
+    napari hands every dock widget opened from the Plugins menu its own ``PublicOnlyProxy`` of
+    the viewer; keyed on the proxy, each widget would get its own session and never see the
+    calibration or the optics another one set.
+    """
+    while hasattr(type(viewer), "__wrapped__") or type(viewer).__name__ == "PublicOnlyProxy":
+        inner = getattr(viewer, "__wrapped__", None)
+        if inner is None or inner is viewer:
+            break
+        viewer = inner
+    return viewer
+
+
 def session_for(viewer) -> Session:
-    """The Session of ``viewer`` (one per viewer, created on first use)."""
+    """The Session of ``viewer`` (one per real viewer, created on first use; proxies share it)."""
+    viewer = real_viewer(viewer)
     key = id(viewer)
     ref, session = _SESSIONS.get(key, (None, None))
     if ref is None or ref() is not viewer:

@@ -42,7 +42,7 @@ from scipy.special import erfc
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.files import atomic_write
-from napari_ssdpc.physics.lattice import Grid
+from napari_ssdpc.physics.lattice import Grid, xy_pair
 from napari_ssdpc.settings.optics import Lenslet, Optics, circle_overlap_fraction
 
 CALIBRATION_FORMAT = "napari-ssdpc-calibration"
@@ -151,8 +151,8 @@ class Calibration:
                 Lenslet(
                     int(r["row"]),
                     int(r["col"]),
-                    tuple(map(float, r["a_um"])),
-                    tuple(map(float, r["u"])),
+                    xy_pair(r["a_um"]),
+                    xy_pair(r["u"]),
                     float(r["fraction"]),
                 )
                 for r in rows
@@ -163,7 +163,7 @@ class Calibration:
                 grid=grid,
                 ei_radius_px=float(d["ei_radius_px"]),
                 optics=optics,
-                frame_shape=tuple(int(v) for v in d["frame_shape"]),
+                frame_shape=(int(d["frame_shape"][0]), int(d["frame_shape"][1])),
                 lenslets=lenslets,
                 centres_px=centres,
                 brightness=bright,
@@ -718,8 +718,8 @@ def _make_grid(lat, axis, optics) -> Grid:
     shift = np.rint(t)
     vertex = lat.centres(shift - 0.5)
     return Grid(
-        tuple(float(v) for v in axis),
-        tuple(float(v) for v in vertex),
+        xy_pair(axis),
+        xy_pair(vertex),
         float(lat.pitch),
         float(lat.theta_deg),
         optics.flip_x,
@@ -789,7 +789,7 @@ def _view_geometry(calibration: Calibration, size):
         half = int(math.floor(cal.ei_radius_px / step))
         h = w = 2 * half + 1
     else:
-        h, w = (int(size), int(size)) if np.isscalar(size) else (int(size[0]), int(size[1]))
+        h, w = (int(size), int(size)) if np.isscalar(size) else (int(size[0]), int(size[1]))  # type: ignore[arg-type]
         if h < 1 or w < 1:
             raise SsdpcError(f"view size must be positive, got {size}")
     px = cal.optics.object_pixel_um
@@ -828,7 +828,7 @@ def extract_views(frame, calibration: Calibration, size=None, *, order: int = 1)
         y_um=ii * px,
         mask=mask,
         pixel_um=px,
-        frame_shape=tuple(cal.frame_shape),
+        frame_shape=(int(cal.frame_shape[0]), int(cal.frame_shape[1])),
     )
 
 

@@ -109,7 +109,10 @@ def estimate_memory(optics, cal, settings, stacks: bool) -> dict:
     k = max(1, len(cal.lenslets))
     with_rl = stacks or settings.method == "rl"
     # (K x Z x band) complex64 operators: WOTF once, RL per half (each lenslet in two halves)
-    ops = k * planes * (view // 2) * 8 * ((settings.method == "wotf") + 2 * with_rl)
+    ops = k * planes * (view // 2) * 8 * ((settings.method in ("wotf", "tv")) + 2 * with_rl)
+    if settings.method == "tv":  # its operator on the padded z grid, and ~12 ADMM work arrays
+        padded = planes + 2 * math.ceil(25.0 / settings.dz_um)
+        ops += k * padded * (view // 2) * 8 + 12 * padded * view * 8
     if with_rl:  # per half and plane: padded (~1.7x view side) support and normalisation arrays
         ops += 4 * planes * int(3 * view) * 12
     outputs = planes * view * 4 * (3 + 6 * with_rl)  # ri, delta_n, phase (+ stacks, dpc, absorption)

@@ -39,7 +39,7 @@ class Grid:
         if axis_px is None:
             axis_px = ((optics.width_px - 1) / 2.0, (optics.height_px - 1) / 2.0)
         g = cls(
-            tuple(float(v) for v in axis_px),
+            xy_pair(axis_px),
             (0.0, 0.0),
             float(pitch_px or optics.pitch_px),
             float(rotation_deg),
@@ -96,10 +96,16 @@ class Grid:
     @classmethod
     def from_dict(cls, d: dict) -> Grid:
         return cls(
-            tuple(map(float, d["axis_px"])),
-            tuple(map(float, d["vertex_px"])),
+            xy_pair(d["axis_px"]),
+            xy_pair(d["vertex_px"]),
             float(d["pitch_px"]),
             float(d.get("rotation_deg", 0.0)),
             bool(d.get("flip_x", False)),
             bool(d.get("flip_y", False)),
         )
+
+
+def xy_pair(values) -> tuple[float, float]:
+    """(x, y) as two floats."""
+    x, y = values
+    return float(x), float(y)

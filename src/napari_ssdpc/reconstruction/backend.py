@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -29,8 +30,8 @@ class Backend:
     """One device: its array module ``xp`` and FFT module ``fft``."""
 
     device: str  # 'cpu' or 'gpu'
-    xp: object  # numpy or cupy
-    fft: object  # scipy.fft or cupyx.scipy.fft
+    xp: Any  # numpy or cupy
+    fft: Any  # scipy.fft or cupyx.scipy.fft
     workers: int = -1  # scipy.fft threads (CPU only)
     name: str = ""  # what it runs on, for reports
 

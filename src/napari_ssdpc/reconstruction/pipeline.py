@@ -80,7 +80,7 @@ class Result:
     ri: np.ndarray
     delta_n: np.ndarray
     phase: np.ndarray
-    absorption: np.ndarray
+    absorption: np.ndarray | None
     dpc: dict
     stacks: dict
     z_um: np.ndarray
@@ -99,12 +99,12 @@ class Result:
     @property
     def projected_phase(self) -> np.ndarray:
         """(y, x) phase summed over the slabs, rad: what a 2D quantitative phase image shows."""
-        return np.sum(self.phase, axis=0, dtype=np.float64).astype(np.float32)
+        return np.asarray(np.sum(self.phase, axis=0, dtype=np.float64), np.float32)
 
     @property
     def opd_nm(self) -> np.ndarray:
         """(y, x) optical path difference Σ_z Δn dz, nm."""
-        return (1e3 * self.voxel_um[0] * np.sum(self.delta_n, axis=0, dtype=np.float64)).astype(np.float32)
+        return np.asarray(1e3 * self.voxel_um[0] * np.sum(self.delta_n, axis=0, dtype=np.float64), np.float32)
 
     @property
     def dry_mass(self) -> np.ndarray:

@@ -47,6 +47,13 @@ from napari_ssdpc.settings.optics import Optics
 __all__ = ["LAMBDA_PER_NOISE", "SIGNS", "TvInversion", "TvReport"]
 
 SIGNS = ("auto", "denser", "lighter", "any")
+#: ℓ of the sparsity term μ‖φ‖₁ with μ = λ/ℓ, in units of the axial resolution R_z: without it a
+#: constant offset inside the field stop (the unmeasured slice mean) costs only its boundary.
+SPARSITY_PER_RZ = 0.5
+#: Over-relaxation of the ADMM splits (1: none; 1.5-1.8 is usual).
+RELAX = 1.6
+#: Warn when the last relative change is above this many times the tolerance.
+FAR_FROM_CONVERGED = 5.0
 #: Iterations of each sign's probe solve when the sign is 'auto'.
 PROBE = 12
 
@@ -147,8 +154,10 @@ class TvInversion:
             raise SsdpcError("a view without direct light cannot be inverted; leave dark-field lenslets out")
         i0 = np.asarray(i0_model if i0 is None else i0, float)
         self.w = np.sqrt(i0 / i0.max()).astype(np.float32)  # sqrt of the shot-noise weights
+        r_z = float(design(optics)["r_z_ffl_um"])
+        self.sparsity_um = SPARSITY_PER_RZ * r_z
         if pad_um is None:
-            pad_um = float(design(optics)["r_z_ffl_um"])  # one axial resolution length
+            pad_um = r_z  # one axial resolution length
         self.pad = max(4, int(math.ceil(pad_um / self.dz))) if len(z_um) > 1 else 0
         nz = len(z_um) + 2 * self.pad
         self.nz = nz
@@ -320,6 +329,7 @@ class TvInversion:
         z2 = self._project(phi, sign, phi_max)
         u2 = np.zeros_like(phi)
         thresh = lam_abs / self.rho * float(np.prod(self.voxel))
+        l1 = thresh / self.sparsity_um  # μ = λ / ℓ: the medium is Δn = 0 where the data need nothing
         for it in range(iterations):
             if should_stop is not None and should_stop():
                 break
@@ -327,16 +337,19 @@ class TvInversion:
             rhs = rhs0 + sfft.fftn(r, norm="ortho", workers=-1) * self.rho
             phi_hat = self._solve(rhs)
             new = sfft.ifftn(phi_hat, norm="ortho", workers=-1).real.astype(np.float32)
-            change = float(np.linalg.norm(new - phi) / max(np.linalg.norm(new), 1e-12))
+            change = float(np.linalg.norm(new - phi)) / max(float(np.linalg.norm(new)), 1e-12)
             phi = new
             g = self._grad(phi)
             data = float(np.sum(np.abs(self.forward_band(phi_hat) - band) ** 2))
-            report.objective.append(0.5 * data + lam_abs * float(np.sum(np.abs(g))) * float(np.prod(self.voxel)))
-            v = g + u1
-            z1 = np.sign(v) * np.maximum(np.abs(v) - thresh, 0)
+            penalty = lam_abs * (float(np.sum(np.abs(g))) + float(np.sum(np.abs(phi))) / self.sparsity_um)
+            report.objective.append(0.5 * data + penalty * float(np.prod(self.voxel)))
+            # over-relaxed ADMM (Boyd et al. 2011, §3.4.3): converges in fewer iterations
+            v = RELAX * g + (1 - RELAX) * z1 + u1
+            z1 = _shrink(v, thresh)
             u1 = v - z1
-            z2 = self._project(phi + u2, sign, phi_max)
-            u2 = u2 + phi - z2
+            w = RELAX * phi + (1 - RELAX) * z2
+            z2 = self._project(_shrink(w + u2, l1), sign, phi_max)
+            u2 = u2 + w - z2
             report.relative_change.append(change)
             report.iterations = it + 1
             if progress is not None:
@@ -348,10 +361,13 @@ class TvInversion:
         res = self._residual(out, band)
         expected = self._noise_power(sigma, band.shape)
         report.residual_over_noise = res / expected if expected > 0 else float("nan")
-        if not quiet and not report.converged and (should_stop is None or not should_stop()):
+        last = report.relative_change[-1] if report.relative_change else float("inf")
+        # the limit ends most solves a little short of ``tol`` (0.5% change per iteration after 60):
+        # warn only when the iterate is still moving fast
+        if not quiet and last > FAR_FROM_CONVERGED * tol and (should_stop is None or not should_stop()):
             warnings.warn(
                 f"the TV solve did not converge in {report.iterations} iterations (last relative change "
-                f"{report.relative_change[-1] if report.relative_change else float('nan'):.2g} > {tol:g}); "
+                f"{last:.2g} > {FAR_FROM_CONVERGED * tol:g}); "
                 "raise tv_iterations",
                 SsdpcWarning,
                 stacklevel=2,
@@ -369,3 +385,8 @@ class TvInversion:
 
     def _noise_power(self, sigma, band_shape) -> float:
         return float(sigma**2 * self.mask.mean() * np.prod(band_shape))
+
+
+def _shrink(v, t):
+    """Soft threshold: the proximal step of t‖·‖₁."""
+    return np.sign(v) * np.maximum(np.abs(v) - t, 0)

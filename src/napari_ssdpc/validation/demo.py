@@ -78,5 +78,11 @@ def run_demo(out: Path, optics: Optics | None = None, seed: int = 0, z=(-80.0, 8
         f"bead: RI at the centre {m['ri_centre']:.4f} (true 1.49), centroid ({cx:+.2f}, {cy:+.2f}, {cz:+.2f}) µm, "
         f"FWHM lateral {m['fwhm_x_um']:.1f} µm, axial {m['fwhm_z_um']:.1f} µm"
     )
+    st = result.settings
+    if rec.method == "tv":
+        print(
+            f"TV solve: {st['tv_iterations_run']} iterations, sign {st['tv_sign']}, noise {st['tv_noise']:.3g}, "
+            f"residual / noise {st['tv_residual_over_noise']:.1f}"
+        )
     print(f"wrote {out / 'ri.ome.tif'} and {fig}")
     return {"calibration": cal, "result": result, "metrics": m, "simulation_s": t_sim, "reconstruction_s": t_rec}

@@ -26,7 +26,9 @@ def bead_figure(result, sphere, medium_index, path, title=""):
     iz, iy, ix = (int(np.argmin(abs(c - v))) for c, v in ((result.z_um, z), (result.y_um, y), (result.x_um, x)))
     lim = max(float(np.abs(ri - medium_index).max()), 1e-6)
     kw = dict(cmap="RdBu_r", vmin=medium_index - lim, vmax=medium_index + lim)
-    fig, ax = plt.subplots(1, 5, figsize=(19, 3.9), constrained_layout=True)
+    tv = result.convergence.get("tv") if isinstance(result.convergence, dict) else None
+    panels = 6 if tv else 5
+    fig, ax = plt.subplots(1, panels, figsize=(3.8 * panels, 3.9), constrained_layout=True)
     ax[0].imshow(ri[iz], extent=(result.x_um[0], result.x_um[-1], result.y_um[-1], result.y_um[0]), **kw)
     ax[1].imshow(
         ri[:, iy, :], extent=(result.x_um[0], result.x_um[-1], result.z_um[-1], result.z_um[0]), aspect="auto", **kw
@@ -53,6 +55,13 @@ def bead_figure(result, sphere, medium_index, path, title=""):
     ax[4].plot(result.z_um, truth[:, iy, ix], "k--", label="truth")
     ax[4].set_xlabel("z (µm)")
     ax[4].set_title("axial profile")
+    if tv:  # the TV solver's convergence: objective and relative change per ADMM iteration
+        it = np.arange(1, len(tv["objective"]) + 1)
+        ax[5].semilogy(it, np.asarray(tv["objective"]) / tv["objective"][0], label="objective / start")
+        ax[5].semilogy(it, tv["relative_change"], label="relative change of φ")
+        ax[5].set_xlabel("ADMM iteration")
+        ax[5].set_title(f"TV solve ({result.settings.get('tv_sign', '')})", fontsize=8)
+        ax[5].legend(fontsize=8)
     if title:
         fig.suptitle(title)
     fig.savefig(path, dpi=90)
