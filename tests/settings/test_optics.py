@@ -189,7 +189,10 @@ def test_run_config_round_trip_and_optics_file_with_reconstruction(tmp_path, pap
         ({"z_min_um": 10.0, "z_max_um": -10.0}, "z range is empty"),
         ({"tikhonov_alpha": float("inf")}, "finite"),
         ({"rl_iterations": None}, "must be a whole number"),
-        ({"method": "magic"}, "must be 'wotf' or 'rl'"),
+        ({"method": "magic"}, "must be 'tv', 'wotf' or 'rl'"),
+        ({"dn_max": 0.0}, "'dn_max' must be positive"),
+        ({"tv_lambda": -1.0}, "'tv_lambda' must be positive"),
+        ({"sign": "positive"}, "must be 'auto', 'denser', 'lighter' or 'any'"),
     ],
 )
 def test_reconstruction_settings_refuse_impossible_values(changes, words):

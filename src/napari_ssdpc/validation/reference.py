@@ -224,7 +224,7 @@ def reconstruct_reference(rec, frame, canvas: str = "sensor", progress=None) -> 
     t0 = time.perf_counter()
     dpc, _ = rec.dpc_from_stacks(stacks)
     t1 = time.perf_counter()
-    phase = rec.phase_from(views, dpc)
+    phase, _ = rec.phase_from(views, dpc)
     dn = phase_to_delta_n(phase, rec.optics.wavelength_um, rec.dz)
     return ReferenceResult(
         stacks,
