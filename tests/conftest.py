@@ -1,3 +1,4 @@
+import os
 from pathlib import Path
 
 import numpy as np
@@ -33,3 +34,26 @@ def synthetic_series(tmp_path_factory):
         field = ndimage.zoom(rng.standard_normal((64, 77)), (2048 / 64, 2448 / 77), order=1)
         frames.append(np.clip(flat * (1 + 0.05 * field), 0, 4095).astype(np.uint16))
     return optics, calibrate(white, optics), flat, np.stack(frames), white
+
+
+#: Fixtures that open Qt windows: they need a display (pytest-xvfb starts Xvfb where it exists).
+_GUI_FIXTURES = {"qtbot", "qapp", "make_napari_viewer", "make_napari_viewer_proxy"}
+
+
+def _display() -> bool:
+    """A screen Qt can open windows on: a real one, Xvfb (started by pytest-xvfb), or offscreen."""
+    return bool(
+        os.environ.get("DISPLAY")
+        or os.environ.get("WAYLAND_DISPLAY")
+        or os.environ.get("QT_QPA_PLATFORM") in ("offscreen", "minimal")
+    )
+
+
+def pytest_collection_modifyitems(config, items):
+    """Skip the napari GUI tests, with the reason, where no display can be made (Qt would abort)."""
+    if _display():
+        return
+    skip = pytest.mark.skip(reason="no display for the napari GUI tests: install Xvfb (apt install xvfb) to run them")
+    for item in items:
+        if _GUI_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(skip)
