@@ -72,7 +72,7 @@ def test_quick_bench_report(data):
     case = Case("synthetic", optics, None, frames[0], flat, white, None)
     report = run_bench(quick=True, case=case, reference=False, high_na_case=False)
     st = report["stages"]
-    assert set(st) == {"fast", "wotf", "series"}
+    assert set(st) == {"fast", "wotf", "tv", "series"}
     assert report["case"]["planes"] == 11 and report["case"]["iterations"] == 3
     assert st["fast"]["lit_lenslets"] == 4 and 0 < st["fast"]["band_fraction"] < 0.3
     assert st["series"]["frames"] == 3
@@ -80,6 +80,7 @@ def test_quick_bench_report(data):
     json.dumps(report)  # JSON-able for --json
     text = format_report(report)
     assert "| fast, NA 0.1 (standard) | 11 | 4 |" in text and "serial, OME-Zarr" in text
+    assert "| fast, method tv, NA 0.1 | 11 | 4 |" in text and report["stages"]["tv"]["iterations"] >= 1
 
 
 @pytest.mark.slow

@@ -242,6 +242,12 @@ def run_bench(
     say("default method 'wotf' (3D Tikhonov, no RL stacks)")
     _, _, st["wotf"] = fast_path(case, cal, {**cfg, "method": "wotf"}, device, stacks=False)
 
+    say("default method 'tv' (TV with the physical constraints, no RL stacks)")
+    _, tv_res, st["tv"] = fast_path(case, cal, {**cfg, "method": "tv"}, device, stacks=False, repeats=1)
+    its = int(tv_res.settings["tv_iterations_run"])
+    st["tv"].update(iterations=its, iteration_s=st["tv"]["phase_s"] / max(its, 1))
+    say(f"  {its} iterations, {st['tv']['iteration_s']:.2f} s each")
+
     if high_na_case is not False and not quick:
         say("fast path at condenser NA 0.3 (24 lit lenslets)")
         hcase = high_na_case or simulated_case("bench-pmma-bead", 0.3, cache)
@@ -326,6 +332,7 @@ def format_report(report) -> str:
     for key, label in (
         ("fast", "fast, NA 0.1 (standard)"),
         ("wotf", "fast, method wotf, NA 0.1"),
+        ("tv", "fast, method tv, NA 0.1"),
         ("fast_na0.3", "fast, NA 0.3"),
         ("fast_sensor_planes", "fast, fewer planes"),
     ):
