@@ -13,20 +13,12 @@ import pytest
 pytest.importorskip("napari")
 pytest.importorskip("pytestqt")
 
+import gui_steps as _steps
 from napari_ssdpc._napari import sample_data as _sample_data
 from napari_ssdpc._napari import widgets as _widgets
 
 Z, DZ = (-10.0, 10.0), 2.0
-TIMEOUT_MS = 180_000
 MENU = ("1. Optics", "2. Calibrate", "3. Operators", "4. Reconstruct", "5. Line profile")
-
-
-def _wait(qtbot, widget):
-    worker = widget.runner.worker
-    if worker is not None:
-        with qtbot.waitSignal(worker.finished, timeout=TIMEOUT_MS):
-            pass
-    qtbot.waitUntil(lambda: widget.runner.worker is None, timeout=5000)
 
 
 def test_widgets_opened_from_the_plugins_menu_share_one_session_and_reach_an_ri_volume(
@@ -38,29 +30,16 @@ def test_widgets_opened_from_the_plugins_menu_share_one_session_and_reach_an_ri_
     w = {}
     for name in MENU:
         _, widget = viewer.window.add_plugin_dock_widget("napari-ssdpc", name)
-        w[name.split(". ")[1]] = widget
+        w[name.split(". ")[1].lower()] = widget
     sessions = {id(x.session) for x in w.values() if hasattr(x, "session")}
     assert len(sessions) == 1  # one model for the viewer, whatever proxy each widget was given
     assert next(iter(w.values())).session is _widgets.session_for(viewer)
 
     frame, flat, white, optics = _sample_data.bead_frames()
-    for data, kw, kind in _sample_data.pmma_bead_sample():
-        getattr(viewer, f"add_{kind}")(data, **kw)
-    # an edit in Optics reaches the other steps
-    w["Optics"].set_optics(optics)
-    assert _widgets.session_for(viewer).optics is w["Calibrate"].session.optics
-
-    w["Calibrate"].image.value = viewer.layers["PMMA bead white frame"]
-    w["Calibrate"].run()
-    _wait(qtbot, w["Calibrate"])
-    op = w["Operators"]
-    op.calibration.value = viewer.layers["PMMA bead white frame EI circles"]
-    op.z_min.value, op.z_max.value, op.dz.value = Z[0], Z[1], DZ
-    rc = w["Reconstruct"]
-    rc.raw.value = viewer.layers["PMMA bead (raw light field)"]
-    rc.flat.value = viewer.layers["PMMA bead flat frame"]
-    rc.run()
-    _wait(qtbot, rc)
+    _steps.prepare_bead(viewer, qtbot, w, optics, Z, DZ)  # the optics are set in Optics, read by the others
+    assert _widgets.session_for(viewer).optics is w["calibrate"].session.optics
+    w["reconstruct"].run()
+    _steps.wait_for(qtbot, w["reconstruct"])
     assert shown == []
     ri = viewer.layers["PMMA bead (raw light field) RI"]
     assert ri.data.shape[0] == 11 and np.allclose(ri.scale[0], DZ)

@@ -16,13 +16,13 @@ from napari_ssdpc.physics.design import design
 pytest.importorskip("napari")
 pytest.importorskip("pytestqt")
 
+import gui_steps as _steps
 from napari_ssdpc._napari import sample_data as _sample_data
 from napari_ssdpc._napari import widgets as _widgets
 from napari_ssdpc.calibration.calibrate import calibrate
 from napari_ssdpc.reconstruction.pipeline import Reconstructor
 
 Z, DZ, ITER = (-20.0, 20.0), 2.0, 3
-WORKER_TIMEOUT_MS = 120_000
 
 
 @pytest.fixture(scope="module")
@@ -36,15 +36,6 @@ def errors(monkeypatch):
     shown = []
     monkeypatch.setattr(_widgets, "show_error", lambda msg: shown.append(str(msg)))
     return shown
-
-
-def _wait(qtbot, widget):
-    """Wait until the widget's running job has finished."""
-    worker = widget.runner.worker
-    if worker is not None:
-        with qtbot.waitSignal(worker.finished, timeout=WORKER_TIMEOUT_MS):
-            pass
-    qtbot.waitUntil(lambda: widget.runner.worker is None, timeout=5000)
 
 
 def _docks(viewer):
@@ -61,20 +52,8 @@ def _docks(viewer):
 
 
 def _setup_bead(viewer, qtbot, optics):
-    for data, kw, kind in _sample_data.pmma_bead_sample():
-        getattr(viewer, f"add_{kind}")(data, **kw)
-    w = _docks(viewer)
-    w["optics"].set_optics(optics)
-    w["calibrate"].image.value = viewer.layers["PMMA bead white frame"]
-    w["calibrate"].run()
-    _wait(qtbot, w["calibrate"])
-    op = w["operators"]
-    op.calibration.value = viewer.layers["PMMA bead white frame EI circles"]
-    op.z_min.value, op.z_max.value, op.dz.value = Z[0], Z[1], DZ
-    rc = w["reconstruct"]
-    rc.raw.value = viewer.layers["PMMA bead (raw light field)"]
-    rc.flat.value = viewer.layers["PMMA bead flat frame"]
-    rc.iterations.value, rc.alpha.value = ITER, 0.0  # α 0: the method's default
+    w = _steps.prepare_bead(viewer, qtbot, _docks(viewer), optics, Z, DZ)
+    w["reconstruct"].iterations.value, w["reconstruct"].alpha.value = ITER, 0.0  # α 0: the method's default
     return w
 
 
@@ -87,12 +66,12 @@ def test_end_to_end_bead(make_napari_viewer, qtbot, bead, errors):
     assert "pitch" in w["calibrate"].result.value
 
     w["operators"].run()
-    _wait(qtbot, w["operators"])
+    _steps.wait_for(qtbot, w["operators"])
     assert w["operators"].status.value.startswith("built: 21 planes")
     rec_built = _widgets.session_for(viewer).built[1]
 
     w["reconstruct"].run()
-    _wait(qtbot, w["reconstruct"])
+    _steps.wait_for(qtbot, w["reconstruct"])
     assert errors == []
     assert _widgets.session_for(viewer).built[1] is rec_built  # operators reused, not rebuilt
     ri = viewer.layers["PMMA bead (raw light field) RI"]
@@ -117,10 +96,10 @@ def test_end_to_end_bead(make_napari_viewer, qtbot, bead, errors):
     w["reconstruct"].out_phase.value = True
     w["reconstruct"].iterations.value = ITER + 1
     w["reconstruct"].run()
-    _wait(qtbot, w["reconstruct"])
+    _steps.wait_for(qtbot, w["reconstruct"])
     ri.colormap = "viridis"  # a display choice of the user: kept on rerun
     w["reconstruct"].run()
-    _wait(qtbot, w["reconstruct"])
+    _steps.wait_for(qtbot, w["reconstruct"])
     assert viewer.layers["PMMA bead (raw light field) RI"] is ri and len(viewer.layers) == n_layers + 1
     assert ri.colormap.name == "viridis"
     assert ri.metadata["ssdpc"]["settings"]["rl_iterations"] == ITER + 1
@@ -129,7 +108,7 @@ def test_end_to_end_bead(make_napari_viewer, qtbot, bead, errors):
 
     # the PSF stack of one lenslet, in µm
     w["operators"].show_psf()
-    _wait(qtbot, w["operators"])
+    _steps.wait_for(qtbot, w["operators"])
     rec = _widgets.session_for(viewer).built[1]
     first = rec.lenslets[0]  # the lenslet picker starts at the first lit lenslet
     psf = viewer.layers[f"lenslet ({first.row}, {first.col}) PSF"]
@@ -151,14 +130,14 @@ def test_time_series_gives_tzyx_layer(make_napari_viewer, qtbot, errors):
     w["optics"].set_optics(optics)
     w["calibrate"].image.value = viewer.layers["white"]
     w["calibrate"].run()
-    _wait(qtbot, w["calibrate"])
+    _steps.wait_for(qtbot, w["calibrate"])
     w["operators"].calibration.value = viewer.layers["white EI circles"]
     w["operators"].z_min.value, w["operators"].z_max.value, w["operators"].dz.value = Z[0], Z[1], DZ
     rc = w["reconstruct"]
     rc.raw.value, rc.flat.value, rc.iterations.value, rc.alpha.value = raw, viewer.layers["flat"], ITER, 0.0
     rc.frames.value = "all frames"
     rc.run()
-    _wait(qtbot, rc)
+    _steps.wait_for(qtbot, rc)
     assert errors == []
     ri = viewer.layers["cells RI"]
     assert ri.data.shape == (3, 21, 145, 145) and tuple(ri.axis_labels) == ("t", "z", "y", "x")
@@ -180,10 +159,10 @@ def test_cancel_stops_a_running_reconstruction(make_napari_viewer, qtbot, bead, 
     reports = []
     worker = rc.run()
     worker.yielded.connect(reports.append)
-    qtbot.waitUntil(lambda: any(r[2].startswith("RL") for r in reports), timeout=WORKER_TIMEOUT_MS)
+    qtbot.waitUntil(lambda: any(r[2].startswith("RL") for r in reports), timeout=_steps.WORKER_TIMEOUT_MS)
     t0 = time.perf_counter()
     rc.cancel_button.native.click()  # the Cancel button
-    _wait(qtbot, rc)
+    _steps.wait_for(qtbot, rc)
     stopped_s = time.perf_counter() - t0
     rl = [r for r in reports if r[2].startswith("RL")]
     assert rl[-1][0] < rl[-1][1] / 10  # far from the end of the 4 x 5000 iterations
@@ -203,13 +182,13 @@ def test_core_errors_are_notifications(make_napari_viewer, qtbot, bead, errors, 
     # a core warning raised in the worker thread: calibrating on the flat frame (σ < 1)
     w["calibrate"].image.value = viewer.layers["PMMA bead flat frame"]
     w["calibrate"].run()
-    _wait(qtbot, w["calibrate"])
+    _steps.wait_for(qtbot, w["calibrate"])
     assert len(warned) == 1 and warned[0].startswith("flat frame (σ = 0.75, 24 lit lenslets)")
     # a frame that does not match the calibration
     viewer.add_image(frame[:1024, :1024], name="cropped")
     w["reconstruct"].raw.value = viewer.layers["cropped"]
     w["reconstruct"].run()
-    _wait(qtbot, w["reconstruct"])
+    _steps.wait_for(qtbot, w["reconstruct"])
     assert len(errors) == 1 and "differs from the calibration" in errors[0]
     assert "\n" not in errors[0] and "cropped RI" not in viewer.layers
     # sigma >= 1 in the optics editor
