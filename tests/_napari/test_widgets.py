@@ -53,6 +53,7 @@ def _docks(viewer):
 
 def _setup_bead(viewer, qtbot, optics):
     w = _steps.prepare_bead(viewer, qtbot, _docks(viewer), optics, Z, DZ)
+    w["operators"].stacks.value = True  # these tests look at the RL stacks and the PSF too
     w["reconstruct"].iterations.value, w["reconstruct"].alpha.value = ITER, 0.0  # α 0: the method's default
     return w
 

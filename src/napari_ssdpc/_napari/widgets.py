@@ -68,7 +68,7 @@ class Session:
             "dz": float(rec["dz_um"]),
             "model": rec["model"],
             "method": rec["method"],
-            "stacks": True,
+            "stacks": False,  # RL stacks only when DPC, stacks, absorption or the PSF are asked for
             "alpha": rec["tikhonov_alpha"],
             "flat": None,
         }
@@ -723,12 +723,13 @@ class OperatorsWidget(Container):
             label="phase method",
             choices=list(PHASE_METHODS),
             value=rec["method"],
-            tooltip="wotf: 3D Tikhonov with each lenslet's defocused transfer function (default);"
+            tooltip="tv: all views inverted with total variation, the sign of Δn and the field stop (default);"
+            " wotf: 3D Tikhonov with each lenslet's defocused transfer function (fast);"
             " rl: Richardson–Lucy stacks, DPC and Tikhonov per slice (the paper's route)",
         )
         self.stacks = CheckBox(
             text="directional stacks (Richardson–Lucy)",
-            value=True,
+            value=False,
             tooltip="also deconvolve the four halves: needed for DPC, stacks, absorption and the PSF view",
         )
         self.run_button, self.cancel_button, self.status = _buttons(
