@@ -38,11 +38,15 @@ def test_widgets_opened_from_the_plugins_menu_share_one_session_and_reach_an_ri_
     frame, flat, white, optics = _sample_data.bead_frames()
     _steps.prepare_bead(viewer, qtbot, w, optics, Z, DZ)  # the optics are set in Optics, read by the others
     assert _widgets.session_for(viewer).optics is w["calibrate"].session.optics
+    w["operators"].sign.value, w["operators"].tv_iterations.value = "lighter", 30  # PMMA in oil: lighter
     w["reconstruct"].run()
     _steps.wait_for(qtbot, w["reconstruct"])
     assert shown == []
     ri = viewer.layers["PMMA bead (raw light field) RI"]
     assert ri.data.shape[0] == 11 and np.allclose(ri.scale[0], DZ)
+    settings = ri.metadata["ssdpc"]["settings"]
+    assert settings["method"] == "tv" and settings["tv_sign"] == "lighter" and settings["tv_iterations_run"] <= 30
+    assert ri.data.max() <= optics.medium_index + 1e-6  # the sign constraint holds: nowhere denser
     assert np.allclose(ri.scale[1:], optics.object_pixel_um, rtol=2e-3)
     # the bead (n 1.49 in 1.518) at the world origin: Δn < 0 there
     zc, yc, xc = np.round(ri.world_to_data((0.0, 0.0, 0.0))).astype(int)

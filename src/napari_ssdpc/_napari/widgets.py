@@ -33,8 +33,9 @@ from psygnal import Signal
 from napari_ssdpc._napari.reader import calibration_layers, result_layer
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.physics.design import design
+from napari_ssdpc.settings.base import field_range
 from napari_ssdpc.settings.optics import Optics
-from napari_ssdpc.settings.reconstruction import PHASE_METHODS, TRANSFER_MODELS, ReconstructionSettings
+from napari_ssdpc.settings.reconstruction import PHASE_METHODS, SIGNS, TRANSFER_MODELS, ReconstructionSettings
 
 
 # =============================================================================== session
@@ -70,6 +71,7 @@ class Session:
             "method": rec["method"],
             "stacks": False,  # RL stacks only when DPC, stacks, absorption or the PSF are asked for
             "alpha": rec["tikhonov_alpha"],
+            "tv": {k: rec[k] for k in ("sign", "tv_lambda", "tv_iterations")},
             "flat": None,
         }
         for ref in (self.operators_widget, self.reconstruct_widget):
@@ -137,6 +139,7 @@ def build_reconstructor(spec, progress=None):
     return Reconstructor(
         spec["optics"],
         spec["calibration"],
+        ReconstructionSettings.from_dict(spec["tv"], source="TV settings"),
         z=spec["z"],
         dz=spec["dz"],
         model=spec["model"],
@@ -727,6 +730,27 @@ class OperatorsWidget(Container):
             " wotf: 3D Tikhonov with each lenslet's defocused transfer function (fast);"
             " rl: Richardson–Lucy stacks, DPC and Tikhonov per slice (the paper's route)",
         )
+        fields = ReconstructionSettings.model_fields
+        self.sign = ComboBox(
+            label="sign of Δn (tv)", choices=list(SIGNS), value=rec["sign"], tooltip=fields["sign"].description
+        )
+        lo, hi = field_range(ReconstructionSettings, "tv_lambda")
+        self.tv_lambda = FloatSpinBox(
+            label="TV weight (tv)",
+            min=0.0,
+            max=hi,
+            step=0.1,
+            value=0.0,
+            tooltip=f"{fields['tv_lambda'].description}; 0 = automatic, else {lo:g} to {hi:g}",
+        )
+        lo, hi = field_range(ReconstructionSettings, "tv_iterations")
+        self.tv_iterations = SpinBox(
+            label="TV iterations (tv)",
+            min=int(lo),
+            max=int(hi),
+            value=rec["tv_iterations"],
+            tooltip=fields["tv_iterations"].description,
+        )
         self.stacks = CheckBox(
             text="directional stacks (Richardson–Lucy)",
             value=False,
@@ -751,6 +775,9 @@ class OperatorsWidget(Container):
                 self.dz,
                 self.model,
                 self.method,
+                self.sign,
+                self.tv_lambda,
+                self.tv_iterations,
                 self.stacks,
                 self.run_button,
                 self.cancel_button,
@@ -794,6 +821,11 @@ class OperatorsWidget(Container):
             "model": self.model.value,
             "method": self.method.value,
             "stacks": bool(self.stacks.value),
+            "tv": {
+                "sign": self.sign.value,
+                "tv_lambda": float(self.tv_lambda.value) or None,
+                "tv_iterations": int(self.tv_iterations.value),
+            },
         }
 
     def run(self, *_):
