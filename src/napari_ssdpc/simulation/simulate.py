@@ -23,7 +23,8 @@ It is deliberately more complete than the reconstruction model (no inverse crime
 5. The band-limited EI intensity is resampled exactly (Fourier series) onto the
    sensor pixels at M_EI through ``grid.matrix``, with sensor-pixel integration
    (a sinc in the Fourier domain) and the illumination fall-off, and placed at
-   ``grid.lattice_px(row, col)``. Then the camera model (``camera.Camera``).
+   ``grid.lattice_px(row, col)`` (or where ``imperfect.ArrayErrors`` moved the
+   lenslet). Then the camera model (``camera.Camera``).
 
 Intensity unit: 1.0 = an EI whose sub-aperture lies wholly inside the source disk and
 the objective pupil, with no sample, at the field centre.
@@ -44,6 +45,7 @@ from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.physics.pupil import eta
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation.camera import Camera
+from napari_ssdpc.simulation.imperfect import ArrayErrors
 from napari_ssdpc.simulation.phantoms import (
     BarTarget,
     Box,
@@ -388,8 +390,9 @@ class _Imager:
 
 
 # ------------------------------------------------------------------------------ render
-def _render(coeffs, lenslets, optics, sampling, grid, camera):
-    """Place the band-limited EI intensities on the sensor (float image, intensity unit)."""
+def _render(coeffs, centres, optics, sampling, grid, camera):
+    """Place the band-limited EI intensities at their centres (K, 2) px on the sensor
+    (float image, intensity unit)."""
     H, W = optics.height_px, optics.width_px
     frame = np.zeros((H, W), dtype=np.float64)
     nc = coeffs.shape[-1]
@@ -407,8 +410,7 @@ def _render(coeffs, lenslets, optics, sampling, grid, camera):
     # EI patch: as far as the periodic object grid allows (the diffraction tails of the
     # field stop reach well past the EI), faded out over its last TAPER_PX pixels
     half = (0.5 * L - 1.0) / (s if axis_aligned else s * math.sqrt(2))
-    for ln, c in zip(lenslets, coeffs):
-        cx, cy = grid.lattice_px(ln.row, ln.col)
+    for (cx, cy), c in zip(centres, coeffs):
         X = np.arange(max(0, math.ceil(cx - half)), min(W, math.floor(cx + half) + 1))
         Y = np.arange(max(0, math.ceil(cy - half)), min(H, math.floor(cy + half) + 1))
         if len(X) == 0 or len(Y) == 0:
@@ -451,13 +453,21 @@ def _fourier_eval(c, f, y, x):
 
 
 # --------------------------------------------------------------------- sample-free frames
-def _setup(optics, grid, camera):
+def _setup(optics, grid, camera, array=None):
+    """Grid, camera, the lenslets as built (``array``: ArrayErrors) and their EI centres."""
     grid = grid or Grid.nominal(optics)
     camera = camera or Camera()
-    return grid, camera, grid.lenslets(optics)
+    lenslets = grid.lenslets(optics)
+    if array is not None:
+        lenslets, centres = array.apply(grid, lenslets, optics)
+    else:
+        centres = grid.lattice_px([ln.row for ln in lenslets], [ln.col for ln in lenslets]).reshape(-1, 2)
+    return grid, camera, lenslets, centres
 
 
-def white_intensity(optics: Optics, grid: Grid | None = None, camera: Camera | None = None) -> np.ndarray:
+def white_intensity(
+    optics: Optics, grid: Grid | None = None, camera: Camera | None = None, *, array: ArrayErrors | None = None
+) -> np.ndarray:
     """Noise-free white frame (condenser fully open, σ = 1), intensity unit.
 
     Each EI is the iris disk, imaged through the lenslet's sub-aperture A_k in the
@@ -466,7 +476,7 @@ def white_intensity(optics: Optics, grid: Grid | None = None, camera: Camera | N
     brightness is set at the EI centre (the optical axis in the object): the lenslet
     PSF's tails spread ~1 % of the light past the field stop, which would otherwise
     lower the plateau by that much (see docs/simulator.md)."""
-    grid, camera, lenslets = _setup(optics, grid, camera)
+    grid, camera, lenslets, centres = _setup(optics, grid, camera, array)
     sampling = Sampling.for_optics(optics)
     nc = _crop_size(optics, sampling)
     f = np.fft.fftfreq(nc, sampling.size_um / nc)
@@ -476,10 +486,13 @@ def white_intensity(optics: Optics, grid: Grid | None = None, camera: Camera | N
         disk = np.where(fr > 0, R * special.j1(2 * np.pi * R * fr) / fr, np.pi * R * R) / L**2
     coeffs = []
     for ln in lenslets:
+        if ln.fraction <= 0:  # moved out of the pupil (imperfect.ArrayErrors): dark
+            coeffs.append(np.zeros_like(disk))
+            continue
         c = disk * _incoherent_otf(ln.u, optics, sampling.du, nc)
         coeffs.append(c * (ln.fraction / c.sum().real))  # value at the EI centre = exact fraction
     coeffs = np.array(coeffs)
-    return _render(coeffs.astype(np.complex128), lenslets, optics, sampling, grid, camera)
+    return _render(coeffs.astype(np.complex128), centres, optics, sampling, grid, camera)
 
 
 def _incoherent_otf(u_k, optics, du, nc, q=4):
@@ -497,22 +510,35 @@ def _incoherent_otf(u_k, optics, du, nc, q=4):
     return otf / ac[0, 0]
 
 
-def white_frame(optics: Optics, grid: Grid | None = None, camera: Camera | None = None, rng=None) -> np.ndarray:
+def white_frame(
+    optics: Optics,
+    grid: Grid | None = None,
+    camera: Camera | None = None,
+    rng=None,
+    *,
+    array: ArrayErrors | None = None,
+) -> np.ndarray:
     """Raw uint16 white frame (σ = 1): every lenslet inside the pupil is lit, edge
     lenslets at the exact fraction of their sub-aperture inside the pupil."""
     camera = camera or Camera()
-    return camera.apply(white_intensity(optics, grid, camera), camera.rng(rng))
+    return camera.apply(white_intensity(optics, grid, camera, array=array), camera.rng(rng))
 
 
 def flat_intensity(
-    optics: Optics, grid: Grid | None = None, camera: Camera | None = None, source: Source | None = None, progress=None
+    optics: Optics,
+    grid: Grid | None = None,
+    camera: Camera | None = None,
+    source: Source | None = None,
+    progress=None,
+    *,
+    array: ArrayErrors | None = None,
 ) -> np.ndarray:
     """Noise-free flat frame at the optics' condenser NA, intensity unit.
 
     Same source sampling and the same imaging code as ``simulate``, so that
     ``simulate(...).intensity / flat_intensity(...)`` is exactly 1 where the sample
     does not scatter."""
-    grid, camera, lenslets = _setup(optics, grid, camera)
+    grid, camera, lenslets, centres = _setup(optics, grid, camera, array)
     sampling = Sampling.for_optics(optics)
     imager = _Imager(optics, sampling, lenslets)
     idx, _, wgt = (source or Source()).points(optics, sampling)
@@ -520,15 +546,21 @@ def flat_intensity(
         imager.add(imager.empty_spectrum(idx[j]), idx[j], wgt[j])
         if progress is not None:
             progress(j + 1, len(idx))
-    return _render(imager.coefficients(), lenslets, optics, sampling, grid, camera)
+    return _render(imager.coefficients(), centres, optics, sampling, grid, camera)
 
 
 def flat_frame(
-    optics: Optics, grid: Grid | None = None, camera: Camera | None = None, rng=None, source: Source | None = None
+    optics: Optics,
+    grid: Grid | None = None,
+    camera: Camera | None = None,
+    rng=None,
+    source: Source | None = None,
+    *,
+    array: ArrayErrors | None = None,
 ) -> np.ndarray:
     """Raw uint16 flat frame (no sample) at the sample's condenser NA (σ < 1)."""
     camera = camera or Camera()
-    return camera.apply(flat_intensity(optics, grid, camera, source), camera.rng(rng))
+    return camera.apply(flat_intensity(optics, grid, camera, source, array=array), camera.rng(rng))
 
 
 # ----------------------------------------------------------------------------- simulate
@@ -560,6 +592,7 @@ def simulate(
     progress=None,
     *,
     dz_um: float = DZ_UM,
+    array: ArrayErrors | None = None,
 ) -> Simulation:
     """Simulate one raw frame of ``phantom`` (None: no sample, the flat frame).
 
@@ -570,7 +603,7 @@ def simulate(
     optics = optics_for(phantom, optics)
     if phantom is not None:
         phantom = phantom.with_medium(optics.medium_index)
-    grid, camera, lenslets = _setup(optics, grid, camera)
+    grid, camera, lenslets, centres = _setup(optics, grid, camera, array)
     source = source or Source()
     sampling = Sampling.for_optics(optics)
     imager = _Imager(optics, sampling, lenslets)
@@ -585,7 +618,7 @@ def simulate(
         imager.add(spec, idx[j], wgt[j])
         if progress is not None:
             progress(j + 1, len(idx))
-    intensity = _render(imager.coefficients(), lenslets, optics, sampling, grid, camera)
+    intensity = _render(imager.coefficients(), centres, optics, sampling, grid, camera)
     frame = camera.apply(intensity, camera.rng(rng))
     info = {
         "subgrid": slabs.ns if slabs else 0,

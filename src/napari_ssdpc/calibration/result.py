@@ -1,0 +1,264 @@
+"""The calibration result: the per-lenslet table, its versioned JSON, and the EI views.
+
+A ``Calibration`` is what ``calibrate`` measured on one frame: the lattice (as a
+``Grid``), the optical axis, and one row per lenslet with its own measured EI centre,
+its deviation from the lattice, u_k and its brightness. ``Views`` is a stack of EIs
+resampled on the object grid (``views.extract_views``).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.files import atomic_write
+from napari_ssdpc.physics.lattice import Grid, xy_pair
+from napari_ssdpc.settings.optics import Lenslet, Optics
+
+CALIBRATION_FORMAT = "napari-ssdpc-calibration"
+CALIBRATION_VERSION = 1
+
+
+# ---------------------------------------------------------------- data classes
+@dataclass(eq=False)
+class Calibration:
+    """Lenslet grid measured on one frame.
+
+    Attributes
+    ----------
+    grid : Grid
+        Optical axis, the lattice vertex nearest it, mean pitch and rotation: the lattice
+        as a similarity (labels, the EI orientation, the scale).
+    ei_radius_px : float
+        Median radius of the EI disks, px.
+    lenslets : list of Lenslet
+        One per lenslet overlapping the pupil; ``a_um``, ``u`` and ``fraction`` come from
+        the lenslet's own measured centre.
+    centres_px : ndarray (K, 2)
+        EI centre (x, y) px per lenslet: measured where ``measured``, else the affine
+        lattice's position.
+    brightness : ndarray (K,)
+        EI brightness relative to a fully lit lenslet (≈ ``fraction`` on a white frame;
+        NaN where the EI leaves the frame).
+    residual_px : float
+        rms deviation of the measured EI centres from the fitted affine lattice, px.
+    axis_rms : float
+        rms of the brightness-pattern fit that gave the axis, relative to full brightness.
+    kind : str
+        "white", "flat" or "sample"; ``kind_evidence`` says why and how sure.
+    deviation_px : ndarray (K, 2)
+        Measured centre minus lattice position, px (NaN where not measured).
+    measured : ndarray (K,) bool
+        Whether the lenslet's centre was measured on its own rim.
+    shear_deg, aspect : float
+        Angle between the two lattice axes minus 90°, ratio of their lengths minus 1.
+    """
+
+    grid: Grid
+    ei_radius_px: float
+    optics: Optics
+    frame_shape: tuple[int, int]
+    lenslets: list[Lenslet]
+    centres_px: np.ndarray
+    brightness: np.ndarray
+    residual_px: float
+    axis_rms: float
+    kind: str
+    n_fitted: int = 0
+    version: int = CALIBRATION_VERSION
+    deviation_px: np.ndarray | None = None
+    measured: np.ndarray | None = None
+    shear_deg: float = 0.0
+    aspect: float = 0.0
+    kind_evidence: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        k = len(self.lenslets)
+        if self.deviation_px is None:
+            self.deviation_px = np.full((k, 2), np.nan)
+        if self.measured is None:
+            self.measured = np.isfinite(self.deviation_px).all(axis=1)
+
+    @property
+    def max_deviation_px(self) -> float:
+        """Largest distance of a measured EI centre from the lattice, px (0 when none)."""
+        d = np.hypot(*np.asarray(self.deviation_px, float).T)
+        d = d[np.isfinite(d)]
+        return float(d.max()) if d.size else 0.0
+
+    # ------------------------------------------------------------- table
+    @property
+    def table(self) -> list[dict]:
+        """One dict per lenslet: row, col, centre_px, measured, deviation_px, a_um, u,
+        fraction, halves, brightness."""
+        out = []
+        dev = np.asarray(self.deviation_px, float)
+        for ln, c, b, d in zip(self.lenslets, self.centres_px, self.brightness, dev):
+            out.append(
+                {
+                    "row": ln.row,
+                    "col": ln.col,
+                    "centre_px": [float(c[0]), float(c[1])],
+                    "measured": bool(np.isfinite(d).all()),
+                    "deviation_px": [float(d[0]), float(d[1])] if np.isfinite(d).all() else None,
+                    "a_um": [float(v) for v in ln.a_um],
+                    "u": [float(v) for v in ln.u],
+                    "fraction": float(ln.fraction),
+                    "halves": list(ln.halves),
+                    "brightness": None if not np.isfinite(b) else float(b),
+                }
+            )
+        return out
+
+    def check_frame(self, frame, name="frame") -> np.ndarray:
+        """Validate a frame against this calibration; return it as float32."""
+        img = validated(frame, name)
+        if img.shape != tuple(self.frame_shape):
+            raise SsdpcError(
+                f"{name}: shape {img.shape} differs from the calibration's {tuple(self.frame_shape)}; "
+                "use frames from the same camera ROI and binning, or calibrate on a white frame "
+                "of this shape"
+            )
+        return img
+
+    # ------------------------------------------------------------- JSON
+    def to_dict(self) -> dict:
+        return {
+            "format": CALIBRATION_FORMAT,
+            "version": self.version,
+            "kind": self.kind,
+            "frame_shape": [int(v) for v in self.frame_shape],
+            "axis_px": [float(v) for v in self.grid.axis_px],
+            "pitch_px": float(self.grid.pitch_px),
+            "rotation_deg": float(self.grid.rotation_deg),
+            "ei_radius_px": float(self.ei_radius_px),
+            "residual_px": float(self.residual_px),
+            "axis_rms": float(self.axis_rms),
+            "n_fitted": int(self.n_fitted),
+            "max_deviation_px": self.max_deviation_px,
+            "shear_deg": float(self.shear_deg),
+            "aspect": float(self.aspect),
+            "kind_evidence": dict(self.kind_evidence),
+            "grid": self.grid.to_dict(),
+            "lenslets": self.table,
+            "optics": self.optics.to_dict(),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict, source: str = "calibration") -> Calibration:
+        if not isinstance(d, dict) or d.get("format") != CALIBRATION_FORMAT:
+            raise SsdpcError(f"{source}: not a napari-ssdpc calibration file; run `ssdpc calibrate` on a white frame")
+        if d.get("version") != CALIBRATION_VERSION:
+            raise SsdpcError(
+                f"{source}: calibration version {d.get('version')!r} is not supported "
+                f"(this software reads version {CALIBRATION_VERSION}); re-run `ssdpc calibrate`"
+            )
+        try:
+            optics = Optics.from_dict(d["optics"], source=f"{source} optics")
+            grid = Grid.from_dict(d["grid"])
+            rows = d["lenslets"]
+            lenslets = [
+                Lenslet(
+                    int(r["row"]),
+                    int(r["col"]),
+                    xy_pair(r["a_um"]),
+                    xy_pair(r["u"]),
+                    float(r["fraction"]),
+                )
+                for r in rows
+            ]
+            centres = np.array([r["centre_px"] for r in rows], dtype=float).reshape(-1, 2)
+            bright = np.array([np.nan if r.get("brightness") is None else r["brightness"] for r in rows], float)
+            dev = np.array([r.get("deviation_px") or [np.nan, np.nan] for r in rows], float).reshape(-1, 2)
+            return cls(
+                grid=grid,
+                ei_radius_px=float(d["ei_radius_px"]),
+                optics=optics,
+                frame_shape=(int(d["frame_shape"][0]), int(d["frame_shape"][1])),
+                lenslets=lenslets,
+                centres_px=centres,
+                brightness=bright,
+                residual_px=float(d["residual_px"]),
+                axis_rms=float(d["axis_rms"]),
+                kind=str(d["kind"]),
+                n_fitted=int(d.get("n_fitted", 0)),
+                version=int(d["version"]),
+                deviation_px=dev,
+                shear_deg=float(d.get("shear_deg", 0.0)),
+                aspect=float(d.get("aspect", 0.0)),
+                kind_evidence=dict(d.get("kind_evidence", {})),
+            )
+        except SsdpcError:
+            raise
+        except (KeyError, TypeError, ValueError) as e:
+            raise SsdpcError(
+                f"{source}: corrupt calibration ({type(e).__name__}: {e}); re-run `ssdpc calibrate`"
+            ) from None
+
+    def to_json(self, path) -> Path:
+        """Write the versioned JSON atomically (a failure never leaves a half file)."""
+        path = Path(path)
+        text = json.dumps(self.to_dict(), indent=1)
+        with atomic_write(path) as tmp:
+            tmp.write_text(text)
+        return path
+
+    @classmethod
+    def from_json(cls, path) -> Calibration:
+        path = Path(path)
+        if not path.is_file():
+            raise SsdpcError(f"calibration file not found: {path} (run `ssdpc calibrate WHITE.tif -o {path.name}`)")
+        try:
+            d = json.loads(path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError):
+            raise SsdpcError(f"{path}: corrupt calibration JSON; re-run `ssdpc calibrate`") from None
+        return cls.from_dict(d, source=str(path))
+
+
+@dataclass(eq=False)
+class Views:
+    """Elemental images resampled on an upright object grid.
+
+    ``data[k]`` (h, w) is the EI of ``lenslets[k]``; pixel (i, j) shows the in-focus
+    object point (``x_um[j]``, ``y_um[i]``) µm, with (0, 0) on the EI centre. ``mask`` is
+    the iris disk (True inside).
+    """
+
+    data: np.ndarray
+    lenslets: list[Lenslet]
+    centres_px: np.ndarray
+    x_um: np.ndarray
+    y_um: np.ndarray
+    mask: np.ndarray
+    pixel_um: float
+    frame_shape: tuple[int, int] = (0, 0)
+
+    @property
+    def extent_um(self) -> tuple[float, float, float, float]:
+        """matplotlib ``imshow`` extent (left, right, bottom, top) in µm."""
+        h = 0.5 * self.pixel_um
+        return (float(self.x_um[0] - h), float(self.x_um[-1] + h), float(self.y_um[-1] + h), float(self.y_um[0] - h))
+
+
+# ------------------------------------------------------------------ validation
+def validated(frame, name="frame") -> np.ndarray:
+    """The frame as a float32 (H, W) array; one-line SsdpcError for anything else."""
+    a = np.asarray(frame)
+    if a.dtype.kind not in "uif":
+        raise SsdpcError(
+            f"{name}: dtype {a.dtype} is not a grey-level image; give the raw camera frame (integer or float)"
+        )
+    if a.ndim != 2:
+        hint = "; pass one frame, e.g. frames[0]" if a.ndim == 3 else ""
+        raise SsdpcError(f"{name}: expected a 2D frame (y, x), got shape {a.shape}{hint}")
+    if min(a.shape) < 16:
+        raise SsdpcError(f"{name}: shape {a.shape} is too small for a light-field frame; give the full camera frame")
+    img = a.astype(np.float32, copy=False)
+    if not np.all(np.isfinite(img)):
+        bad = int(img.size - np.count_nonzero(np.isfinite(img)))
+        raise SsdpcError(f"{name}: {bad} NaN/inf pixels; replace them or re-export the frame")
+    return img

