@@ -29,7 +29,7 @@ import numpy as np
 
 from napari_ssdpc.calibration.axis import all_cells, decide_kind, ei_brightness, fit_axis
 from napari_ssdpc.calibration.disks import Candidates, Circle, find_disks, fit_rim, noise_sigma, rim_circle
-from napari_ssdpc.calibration.lattice_fit import MIN_EIS, AffineLattice, assign, fit_affine
+from napari_ssdpc.calibration.lattice_fit import MIN_AFFINE, MIN_EIS, AffineLattice, assign, fit_affine
 from napari_ssdpc.calibration.overlay import overlay_png
 from napari_ssdpc.calibration.result import CALIBRATION_FORMAT, CALIBRATION_VERSION, Calibration, Views, validated
 from napari_ssdpc.calibration.views import extract_views, insert_views
@@ -268,6 +268,8 @@ def calibrate(frame, optics: Optics, *, kind: str = "auto", guess=None) -> Calib
         )
     # per-lenslet centres: every reliable, bright rim that agrees with the lattice
     keep = reliable & bright & (np.hypot(res[:, 0], res[:, 1]) < OUTLIER * lat.pitch)
+    if trusted.sum() < MIN_AFFINE:  # a few lit EIs fix a square lattice better than their own rims
+        keep[:] = False
     meas = {tuple(int(v) for v in n): c for n, c, k in zip(n_idx, xy, keep) if k}
 
     # 2. optical axis and kind from the brightness pattern of all EIs
