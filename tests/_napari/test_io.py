@@ -90,6 +90,36 @@ def test_foreign_files_give_none(tmp_path):
     assert _reader.get_result_reader(str(plain)) is None
 
 
+def test_bad_files_give_none_never_an_exception(tmp_path):
+    nested = tmp_path / "nested.json"
+    nested.write_text("[" * 100_000 + "]" * 100_000)  # RecursionError in the JSON parser
+    assert _reader.get_calibration_reader(str(nested)) is None
+    latin = tmp_path / "latin.json"
+    latin.write_bytes(b'{"format": "caf\xe9"}')
+    assert _reader.get_calibration_reader(str(latin)) is None
+    frame = np.random.default_rng(4).integers(0, 4095, (128, 160), dtype=np.uint16)
+    whole = tmp_path / "whole.tif"
+    tifffile.imwrite(whole, frame)
+    cut = tmp_path / "cut.tif"  # an interrupted copy: the second half of the pixels is missing
+    cut.write_bytes(whole.read_bytes()[: whole.stat().st_size // 2])
+    assert _reader.get_raw_reader(str(whole)) is not None
+    assert _reader.get_raw_reader(str(cut)) is None and _reader.get_result_reader(str(cut)) is None
+
+
+def test_opens_the_demo_volume_and_a_single_plane(tmp_path):
+    """The demo's ri.ome.tif (written by ``write_ome_tiff``, as the demo does) and a single-plane
+    result (``--z 5 5``) open as (z, y, x) volumes with dz as the z voxel size."""
+    for nz in (21, 1):
+        p = tmp_path / f"ri{nz}.ome.tif"
+        vol = np.full((nz, 40, 48), 1.5, np.float32)
+        desc = {"quantity": "refractive index", "settings": {"z_min_um": 5.0}, "optics": {"medium_index": 1.518}}
+        write_ome_tiff(p, vol, axes="ZYX", voxel_um=(0.5, 0.85, 0.85), description=desc)
+        assert _reader.get_raw_reader(str(p)) is None
+        [(data, kw, _)] = _layers(p, _reader.get_result_reader)
+        assert data.shape == (nz, 40, 48) and kw["scale"] == (0.5, 0.85, 0.85) and kw["translate"][0] == 5.0
+        assert kw["metadata"]["ssdpc"]["quantity"] == "ri" and np.array_equal(np.asarray(data), vol)
+
+
 # ----------------------------------------------------------------------- calibration
 def test_calibration_reader_circles_and_labelled_centres(tmp_path):
     optics = Optics.paper()

@@ -9,6 +9,7 @@ import hashlib
 import importlib
 import json
 import os
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -246,6 +247,64 @@ def test_12_bench_cache_that_is_a_file(cli, tmp_path):
     (tmp_path / "cache").write_text("x")
     rc, err = cli(["bench", "--quick", "--cache", tmp_path / "cache"])
     assert rc == 2 and "is a file" in err
+
+
+def test_12_bench_without_a_writable_home_cache(cli, tmp_path, monkeypatch):
+    from napari_ssdpc.validation import bench
+
+    home = tmp_path / "home"
+    home.mkdir()
+    home.chmod(0o555)
+    seen = {}
+    monkeypatch.setattr(bench, "default_cache", lambda: home / ".cache" / "bench")
+    if os.geteuid() == 0:  # root may write anywhere: the folder reads as read-only to the check
+        real = os.access
+        monkeypatch.setattr(os, "access", lambda p, mode: False if Path(p) == home else real(p, mode))
+    # the benchmark itself is measured elsewhere (tests/validation): here only where its cache goes
+    monkeypatch.setattr(bench, "run_bench", lambda **kw: seen.update(kw) or {})
+    monkeypatch.setattr(bench, "format_report", lambda report: "report")
+    try:
+        rc, _ = cli(["bench", "--quick"])
+    finally:
+        home.chmod(0o755)
+    cache = Path(seen["cache_dir"])
+    assert rc == 0 and not (home / ".cache").exists() and cache.is_dir() and os.access(cache, os.W_OK)
+    shutil.rmtree(cache)
+
+
+def test_10_the_demo_never_replaces_a_file_it_did_not_write(cli, tmp_path):
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    (folder / "white.tif").write_bytes(b"my white frame")
+    (folder / "notes.txt").write_text("kept")
+    rc, err = cli(["demo", "-o", folder])
+    assert rc == 2 and "white.tif would replace a file napari-ssdpc did not write" in err and "--overwrite" in err
+    assert (folder / "white.tif").read_bytes() == b"my white frame" and sorted(p.name for p in folder.iterdir()) == [
+        "notes.txt",
+        "white.tif",
+    ]
+    rc, err = cli(["demo", "-o", folder, "--seed", "-1"])
+    assert rc == 2 and "seed >= 0" in err
+
+
+def test_10_files_we_wrote_are_known_as_ours(files, tmp_path):
+    """Frames and overlays carry the napari-ssdpc stamp, so a rerun may replace them; a user's
+    TIFF or PNG does not."""
+    from napari_ssdpc.calibration.calibrate import Calibration, overlay_png
+    from napari_ssdpc.io.frames import write_tiff
+    from napari_ssdpc.io.paths import is_ours
+    from napari_ssdpc.validation.figures import _plt
+
+    white = tifffile.imread(files / "white.tif")
+    write_tiff(tmp_path / "ours.tif", white)
+    tifffile.imwrite(tmp_path / "theirs.tif", white)
+    overlay_png(white, Calibration.from_json(files / "cal.json"), tmp_path / "ours.png")
+    plt = _plt()
+    fig = plt.figure()
+    fig.savefig(tmp_path / "theirs.png")
+    plt.close(fig)
+    assert is_ours(tmp_path / "ours.tif") and is_ours(tmp_path / "ours.png")
+    assert not is_ours(tmp_path / "theirs.tif") and not is_ours(tmp_path / "theirs.png")
 
 
 # ------------------------------------------------------- 13: the right fix named

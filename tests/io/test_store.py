@@ -182,6 +182,42 @@ def test_the_reader_shows_frames_not_marked_done_as_nan(setup, tmp_path):
     root["ssdpc_done"][1] = 0  # as if killed between frame 1's chunks
     ri = read_complete(out, "ri")
     assert np.isnan(ri[1]).all() and np.isfinite(ri[[0, 2]]).all()
+    # napari's reader stays lazy and shows the same: no frame with RI but without its phase
+    from napari_ssdpc._napari.reader import get_result_reader
+
+    layers = {kw["metadata"]["ssdpc"]["quantity"]: data for data, kw, _ in get_result_reader(str(out))(str(out))}
+    assert set(layers) == {"ri", "phase"}
+    for data in layers.values():
+        shown = np.asarray(data)
+        assert data.shape == (3, 2, 8, 8) and np.isnan(shown[1]).all() and np.isfinite(shown[[0, 2]]).all()
+
+
+def test_the_napari_writer_never_writes_into_a_series_or_a_foreign_store(setup, tmp_path):
+    import zarr
+
+    from napari_ssdpc._napari.writer import write_result
+
+    recipe, frames = setup
+    series = tmp_path / "s.zarr"
+    run(recipe, frames, series)
+    foreign = tmp_path / "other.zarr"
+    zarr.open_group(str(foreign), mode="w").create_array("img", shape=(4, 4), dtype="uint8")
+    plain = tmp_path / "plain.zarr"
+    plain.mkdir()
+    (plain / "notes.txt").write_text("mine")
+    vol = np.zeros((2, 8, 8), np.float32)
+    refused = {series: "time series written by ssdpc reconstruct", foreign: "did not write", plain: "did not write"}
+    for store, words in refused.items():
+        before = tree_sha(store)
+        with pytest.raises(SsdpcError, match=words):
+            write_result(store, vol, voxel_um=(1, 1, 1), info={"quantity": "phase"})
+        assert tree_sha(store) == before, store.name
+    assert not list(tmp_path.glob(".*part"))
+    empty = tmp_path / "empty.zarr"  # an empty folder holds nothing to lose
+    empty.mkdir()
+    write_result(empty, vol, voxel_um=(1, 1, 1), info={"quantity": "ri"})
+    write_result(empty, vol + 1, voxel_um=(1, 1, 1), info={"quantity": "phase"})  # a second layer: ours, kept
+    assert sorted(k for k in zarr.open_group(str(empty), mode="r").group_keys()) == ["phase", "ri"]
 
 
 @pytest.mark.parametrize("value, words", [(np.nan, "NaN/inf"), (9e12, "beyond any sample")])

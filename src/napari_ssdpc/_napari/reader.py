@@ -81,7 +81,18 @@ def _is_raw_tiff(p: Path) -> bool:
             return False
         if len(dims) == 3 and dims[0][0] == "Z" and tif.is_ome and "PhysicalSizeZ" in (tif.ome_metadata or ""):
             return False  # a calibrated z-stack: a volume, not a series
-    return True
+        return _complete(tif, p.stat().st_size)
+
+
+def _complete(tif, size: int) -> bool:
+    """Whether the pixels of the first series' last page lie inside the file (a truncated copy
+    or an interrupted transfer ends early, and would fail only when that frame is shown)."""
+    pages = tif.series[0].pages
+    last = pages[len(pages) - 1] if len(pages) else None
+    if last is None:
+        return False
+    ends = [o + n for o, n in zip(last.dataoffsets, last.databytecounts)]
+    return bool(ends) and max(ends) <= size and all(n > 0 for n in last.databytecounts)
 
 
 def open_lazy(path, squeeze: bool = True):
@@ -126,7 +137,7 @@ def get_calibration_reader(path):
 
     try:
         d = json.loads(p.read_text())
-    except (ValueError, UnicodeDecodeError, OSError):
+    except (ValueError, UnicodeDecodeError, OSError, RecursionError):  # not JSON, or nested too deep
         return None
     if not isinstance(d, dict) or d.get("format") != CALIBRATION_FORMAT:
         return None
@@ -211,7 +222,7 @@ def get_result_reader(path):
         return None
     try:
         if p.is_dir() and p.suffix.lower() == ".zarr":
-            return read_result if _zarr_images(p) else None
+            return read_result if zarr_images(p) else None
         if p.is_file() and p.suffix.lower() in (".tif", ".tiff"):
             import tifffile
 
@@ -242,7 +253,7 @@ def _our_description(tif):
     return d if _is_ours(d) else None
 
 
-def _zarr_images(p: Path) -> list:
+def zarr_images(p: Path) -> list:
     """[(name, group)] of our OME-NGFF image groups: the root itself or its child groups."""
     import zarr
 
@@ -272,6 +283,9 @@ def read_result(path):
         axes = tif.series[0].axes
         pixels = tifffile.xml2dict(tif.ome_metadata)["OME"]["Image"]["Pixels"]
     data = open_lazy(p, squeeze=False)
+    axes = axes.replace("Q", "").replace("I", "T")
+    if "Z" not in axes and axes.endswith("YX"):  # a single plane (--z 5 5): tifffile drops Z
+        data, axes = data[..., np.newaxis, :, :], axes[:-2] + "ZYX"
     voxel = tuple(float(pixels.get(f"PhysicalSize{a}", 1.0)) for a in "ZYX")
     stem = _stem(p)
     hint = stem.rsplit("_", 1)[-1] if "_" in stem else ""
@@ -279,19 +293,23 @@ def read_result(path):
     if q == hint or (hint == "n" and q == "delta_n"):  # OUT_phase.ome.tif, OUT_delta_n.ome.tif
         stem = stem[: -len(q) - 1]
     desc = {"name": stem, **desc, "quantity": q}
-    return _result_layers(data, axes.replace("Q", "").replace("I", "T"), desc, voxel)
+    return _result_layers(data, axes, desc, voxel)
 
 
 def _read_zarr(p: Path):
     import dask.array as da
 
     layers = []
-    for key, g in _zarr_images(p):
+    from napari_ssdpc.io.store import mask_incomplete
+
+    for key, g in zarr_images(p):
         desc = dict(g.attrs["napari_ssdpc"])
         ms = g.attrs["multiscales"][0]
         ds = ms["datasets"][0]
-        data = da.from_zarr(g[ds["path"]])
         axes = "".join(a["name"] for a in ms["axes"]).upper()
+        data = da.from_zarr(g[ds["path"]])
+        if axes.startswith("T"):  # a series: frames not marked done are NaN, never half a frame
+            data = mask_incomplete(data, p)
         tr = {t["type"]: t[t["type"]] for t in ds["coordinateTransformations"]}
         voxel = tuple(float(s) for a, s in zip(axes, tr["scale"]) if a in "ZYX")
         if "translation" in tr and "origin_um" not in desc:

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from napari_ssdpc import __version__
-from napari_ssdpc._napari.reader import RESULT_FORMAT, RESULT_VERSION
+from napari_ssdpc._napari.reader import RESULT_FORMAT, RESULT_VERSION, zarr_images
+from napari_ssdpc._version import SOFTWARE
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.frames import write_ome_tiff
 
@@ -60,7 +60,7 @@ def _description(info, voxel_um, origin_um) -> dict:
         version=RESULT_VERSION,
         voxel_um=[float(v) for v in voxel_um],
         origin_um=[float(v) for v in origin_um],
-        software=f"napari-ssdpc {__version__}",
+        software=SOFTWARE,
     )
     return _jsonable(d)
 
@@ -92,6 +92,8 @@ def write_ome_zarr(path, data, *, name: str, voxel_um, origin_um=(0.0, 0.0, 0.0)
         raise SsdpcError(f"output folder does not exist: {path.parent} (create it first)")
     if path.exists() and not path.is_dir():
         raise SsdpcError(f"{path} exists and is not a folder; choose another name for the OME-Zarr output")
+    if path.is_dir():
+        _check_own_store(path)
     nd = np.ndim(data)
     if nd not in (3, 4):
         raise SsdpcError(f"OME-Zarr output needs (z, y, x) or (t, z, y, x) data, got shape {np.shape(data)}")
@@ -111,6 +113,28 @@ def write_ome_zarr(path, data, *, name: str, voxel_um, origin_um=(0.0, 0.0, 0.0)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return path
+
+
+def _check_own_store(path: Path) -> None:
+    """An existing folder is written into only when it is an empty folder or a store of
+    result layers this writer made; another program's store and a time series of
+    ``ssdpc reconstruct`` (whose stamp names its images) are refused before anything is written."""
+    from napari_ssdpc.io.store import STAMP
+
+    if not any(path.iterdir()):
+        return
+    try:
+        import zarr
+
+        root = zarr.open_group(str(path), mode="r")
+        series = STAMP in root.attrs
+        ours = bool(zarr_images(path))
+    except Exception:  # not a zarr store at all
+        series, ours = False, False
+    if series:
+        raise SsdpcError(f"{path} is a time series written by ssdpc reconstruct; save the layer to a new NAME.zarr")
+    if not ours:
+        raise SsdpcError(f"{path} holds data napari-ssdpc did not write; save the layer to a new NAME.zarr")
 
 
 def _replace_dir(src: Path, dst: Path):

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from napari_ssdpc._version import SOFTWARE
 from napari_ssdpc.calibration.result import Calibration, validated
 from napari_ssdpc.files import atomic_write
 
@@ -58,5 +59,5 @@ def overlay_png(frame, calibration: Calibration, path, *, dpi: int = 110) -> Pat
     fig.tight_layout()
     path = Path(path)
     with atomic_write(path) as tmp:
-        fig.savefig(tmp, dpi=dpi, format="png")
+        fig.savefig(tmp, dpi=dpi, format="png", metadata={"Software": SOFTWARE})
     return path

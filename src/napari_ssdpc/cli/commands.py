@@ -8,16 +8,18 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from napari_ssdpc import __version__
+from napari_ssdpc._version import SOFTWARE
 from napari_ssdpc.cli import checks
 from napari_ssdpc.cli.options import run_config
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.io.paths import check_outputs, writable_folder
+from napari_ssdpc.io.paths import check_outputs, is_ours, writable_folder
 from napari_ssdpc.reconstruction import outputs
 
 __all__ = [
@@ -73,7 +75,7 @@ def cmd_calibrate(args):
         {"white frame": args.frame, "optics file": args.optics},
         sidecars=["overlay"],
         overwrite=args.overwrite,
-        replaceable=lambda p: p.suffix == ".png" and _is_calibration(out),
+        replaceable=lambda p: is_ours(p) or (p.suffix == ".png" and _is_calibration(out)),  # older overlays: unstamped
     )
     optics = _optics(args.optics)
     frame = read_frame(args.frame, allow_series=False, name="white frame")
@@ -88,9 +90,19 @@ def cmd_calibrate(args):
     print(f"wrote {out} and {png}")
 
 
-def _is_calibration(path: Path) -> bool:
-    from napari_ssdpc.io.paths import is_ours
+def _can_create(folder: Path) -> bool:
+    """Whether ``folder`` exists and is writable, or can be made in its nearest existing parent."""
+    while not folder.exists():
+        folder = folder.parent
+    return folder.is_dir() and os.access(folder, os.W_OK | os.X_OK)
 
+
+def _check_seed(seed: int) -> None:
+    if seed < 0:
+        raise SsdpcError(f"--seed {seed}: give a seed >= 0")
+
+
+def _is_calibration(path: Path) -> bool:
     return path.is_file() and is_ours(path)
 
 
@@ -137,8 +149,7 @@ def _check_simulate_numbers(args, optics):
         )
     if not math.isfinite(args.rotation) or abs(args.rotation) > 45:
         raise SsdpcError(f"--rotation {args.rotation:g}: give a finite angle between -45 and 45 degrees")
-    if args.seed < 0:
-        raise SsdpcError(f"--seed {args.seed}: give a seed >= 0")
+    _check_seed(args.seed)
     if args.frames < 1 or args.frames > 10000:
         raise SsdpcError(f"--frames {args.frames}: give 1 to 10000 frames")
 
@@ -257,7 +268,7 @@ def cmd_reconstruct(args):
         checks.check_flat(flat, optics, cal)
     recipe = Recipe(optics, cal, dict(settings=cfg.reconstruction, stacks=stacks), flat)
     meta = {
-        "software": f"napari-ssdpc {__version__}",
+        "software": SOFTWARE,
         "optics": optics.to_dict(),
         "calibration": {k: v for k, v in cal.to_dict().items() if k != "lenslets"},
     }
@@ -318,17 +329,22 @@ def cmd_bench(args):
     args : argparse.Namespace
         The parsed options of `ssdpc bench` (see ``ssdpc bench --help``).
     """
-    from napari_ssdpc.validation.bench import format_report, run_bench
+    from napari_ssdpc.validation.bench import default_cache, format_report, run_bench
 
     if args.cache is not None:
         cache = Path(args.cache)
         if cache.exists() and not cache.is_dir():
             raise SsdpcError(f"--cache {cache} is a file; give a folder")
         writable_folder(cache if cache.exists() else cache.parent, "--cache folder")
+    else:
+        cache = default_cache()
+        if not _can_create(cache):  # a read-only home: simulate without keeping the frames
+            cache = Path(tempfile.mkdtemp(prefix="ssdpc-bench-"))
+            print(f"ssdpc: note: {default_cache()} is not writable; simulated frames go to {cache}", file=sys.stderr)
     report = run_bench(
         quick=args.quick,
         device=args.device,
-        cache_dir=args.cache,
+        cache_dir=cache,
         reference=not args.no_reference,
         log=None if args.json else (lambda m: print(m, file=sys.stderr, flush=True)),
     )
@@ -343,12 +359,15 @@ def cmd_demo(args):
     args : argparse.Namespace
         The parsed options of `ssdpc demo` (see ``ssdpc demo --help``).
     """
-    from napari_ssdpc.validation.demo import run_demo
+    from napari_ssdpc.validation.demo import DEMO_FILES, run_demo
 
+    _check_seed(args.seed)
     out = Path(args.output)
     check_outputs({"demo folder": out}, {"optics file": args.optics}, folders=["demo folder"])
     if out.exists() and not out.is_dir():
         raise SsdpcError(f"demo folder {out} is a file; give a new folder name")
     if out.is_dir():
         writable_folder(out, "demo folder")
+        files = {name: out / name for name in DEMO_FILES}
+        check_outputs(files, {"optics file": args.optics}, sidecars=files, overwrite=args.overwrite)
     run_demo(out, optics=None if args.optics is None else _optics(args.optics), seed=args.seed)

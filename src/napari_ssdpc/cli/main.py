@@ -117,7 +117,10 @@ def build_parser():
     s = sub.add_parser("demo", help="simulate the paper's PMMA bead and process it end to end")
     s.add_argument("-o", "--output", default="ssdpc-demo", help="output folder (default ./ssdpc-demo)")
     s.add_argument("--optics", help=optics_help)
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=int, default=0, help="random seed of the camera noise (>= 0)")
+    s.add_argument(
+        "--overwrite", action="store_true", help="replace files in the folder that napari-ssdpc did not write"
+    )
     s.set_defaults(func=cmd_demo)
     return p
 

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import tifffile
 
+from napari_ssdpc._version import SOFTWARE
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.files import atomic_write, atomic_write_set
 
@@ -134,6 +135,7 @@ def write_tiffs(files: dict, *, metadata=None, **kwargs) -> list[Path]:
     """
     paths = [Path(p) for p in files]
     kwargs.setdefault("photometric", "minisblack")  # a (3, H, W) series is frames, not RGB planes
+    kwargs.setdefault("software", SOFTWARE)  # TIFF tag 305: how io.paths.is_ours knows our files
     with atomic_write_set(paths) as temps:
         for tmp, data in zip(temps, files.values()):
             data = np.asarray(data)
@@ -155,7 +157,7 @@ def _ome_meta(axes: str, voxel_um=None, description: dict | None = None) -> dict
             PhysicalSizeXUnit="µm",
         )
     if description:
-        meta["Description"] = json.dumps(description)
+        meta["Description"] = json.dumps({"software": SOFTWARE, **description})
     return meta
 
 
@@ -255,8 +257,7 @@ def create_ome_zarr(
         return arr
     grp = root.create_group(name, overwrite=True)
     grp.attrs["multiscales"] = ngff_multiscales(axes, voxel_um, name)
-    if attrs:
-        grp.attrs["napari_ssdpc"] = attrs
+    grp.attrs["napari_ssdpc"] = {"software": SOFTWARE, **(attrs or {})}  # how readers know our images
     chunks = chunks or ((1,) * (len(shape) - 3) + tuple(shape[-3:]))
     return grp.create_array("0", shape=tuple(shape), chunks=tuple(chunks), dtype=dtype, fill_value=np.nan)
 

@@ -89,8 +89,14 @@ def is_ours(path: str | Path) -> bool:
             import tifffile
 
             with tifffile.TiffFile(path) as tif:
-                text = getattr(tif.pages[0], "description", "") or ""
+                page = tif.pages[0]
+                text = f"{getattr(page, 'description', '')} {getattr(page, 'software', '')}"
             return "napari-ssdpc" in text
+        if path.suffix == ".png":  # our figures carry a Software text chunk
+            from PIL import Image
+
+            with Image.open(path) as im:
+                return str(im.info.get("Software", "")).startswith("napari-ssdpc")
     except Exception:  # unreadable or foreign: not ours
         return False
     return False

@@ -26,7 +26,7 @@ import numpy as np
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.files import glob_escape, os_error, pid_alive
 
-__all__ = ["DONE", "STAMP", "StoreLock", "done_frames", "open_store", "read_complete"]
+__all__ = ["DONE", "STAMP", "StoreLock", "done_frames", "mask_incomplete", "open_store", "read_complete"]
 
 DONE = "ssdpc_done"  # root array: 1 where a frame is completely written
 STAMP = "ssdpc_series"  # root attribute: what the store holds (input, settings, outputs)
@@ -242,8 +242,36 @@ def read_complete(out, name: str = "ri") -> np.ndarray:
     from napari_ssdpc.io.frames import read_ome_zarr
 
     arr, _, _ = read_ome_zarr(out, name)
-    data = np.array(arr[:], dtype=np.float32)
-    done = np.zeros(len(data), bool)
+    return np.asarray(mask_incomplete(np.array(arr[:], dtype=np.float32), out))
+
+
+def mask_incomplete(data, out):
+    """``data`` (t, ...) of the store ``out`` with every frame not marked done set to NaN.
+
+    Parameters
+    ----------
+    data : numpy.ndarray or dask.array.Array
+        (t, ...) frames; a dask array stays lazy.
+    out : str or Path
+        The store (its ``ssdpc_done`` array). A store without one (not a series) is returned as is.
+
+    Returns
+    -------
+    numpy.ndarray or dask.array.Array
+        Same type and shape, float.
+    """
+    import zarr
+
+    root = zarr.open_group(str(out), mode="r")
+    if DONE not in root:
+        return data
+    done = np.zeros(data.shape[0], bool)
     done[done_frames(out)] = True
-    data[~done] = np.nan
-    return data
+    if done.all():
+        return data
+    keep = done.reshape((-1,) + (1,) * (data.ndim - 1))
+    if isinstance(data, np.ndarray):
+        return np.where(keep, data, np.float32(np.nan))
+    import dask.array as da
+
+    return da.where(keep, data, np.float32(np.nan))

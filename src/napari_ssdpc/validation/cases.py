@@ -7,6 +7,7 @@ Used by the slow tests and by ``docs/make_validation.py``; also useful to plan a
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -14,6 +15,8 @@ import numpy as np
 from scipy import ndimage
 
 from napari_ssdpc.calibration.calibrate import calibrate
+from napari_ssdpc.errors import SsdpcWarning
+from napari_ssdpc.files import atomic_write
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.reconstruction.pipeline import Reconstructor
 from napari_ssdpc.settings.optics import Optics
@@ -62,8 +65,16 @@ def simulate_case(
     flat = sim.flat_frame(optics, grid=grid, rng=rng)
     white = sim.white_frame(optics, grid=grid, rng=rng)
     if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        np.savez_compressed(path, frame=frame, flat=flat, white=white, seconds=seconds)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with atomic_write(path) as tmp, open(tmp, "wb") as f:
+                np.savez_compressed(f, frame=frame, flat=flat, white=white, seconds=seconds)
+        except OSError as e:  # the cache only saves time: go on without it
+            warnings.warn(
+                f"could not cache {name} in {path.parent} ({e.strerror}); it is simulated again next time",
+                SsdpcWarning,
+                stacklevel=2,
+            )
     return Case(name, optics, phantom, frame, flat, white, grid, seconds)
 
 

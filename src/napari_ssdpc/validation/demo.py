@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from napari_ssdpc.calibration.calibrate import calibrate, overlay_png
-from napari_ssdpc.io.frames import write_ome_tiff, write_tiff
+from napari_ssdpc.io.frames import write_ome_tiff, write_tiffs
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.progress import tqdm_callback
 from napari_ssdpc.reconstruction.pipeline import Reconstructor
@@ -18,6 +18,9 @@ from napari_ssdpc.simulation import phantoms
 from napari_ssdpc.simulation import simulate as sim
 from napari_ssdpc.validation.cases import VALIDATION_NA, bead_metrics
 from napari_ssdpc.validation.figures import bead_figure
+
+# What the demo writes into its folder (each file atomically; the three frames as one set).
+DEMO_FILES = ("bead.tif", "flat.tif", "white.tif", "calibration.json", "calibration.png", "ri.ome.tif", "summary.png")
 
 
 def run_demo(out: Path, optics: Optics | None = None, seed: int = 0, z=(-80.0, 80.0), dz: float = 1.0) -> dict:
@@ -39,8 +42,7 @@ def run_demo(out: Path, optics: Optics | None = None, seed: int = 0, z=(-80.0, 8
     flat = sim.flat_frame(optics, grid=grid, rng=rng)
     white = sim.white_frame(optics, grid=grid, rng=rng)
     t_sim = time.perf_counter() - t0
-    for name, img in (("bead", frame), ("flat", flat), ("white", white)):
-        write_tiff(out / f"{name}.tif", img)
+    write_tiffs({out / "bead.tif": frame, out / "flat.tif": flat, out / "white.tif": white})
     print(f"simulated bead, flat and white frames in {t_sim:.0f} s")
 
     cal = calibrate(white, optics)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from napari_ssdpc._version import SOFTWARE
+
 
 def _plt():
     import matplotlib
@@ -64,6 +66,6 @@ def bead_figure(result, sphere, medium_index, path, title=""):
         ax[5].legend(fontsize=8)
     if title:
         fig.suptitle(title)
-    fig.savefig(path, dpi=90)
+    fig.savefig(path, dpi=90, metadata={"Software": SOFTWARE})
     plt.close(fig)
     return path
