@@ -201,3 +201,23 @@ def test_reconstruction_settings_refuse_impossible_values(changes, words):
     with pytest.raises(SsdpcError) as e:
         ReconstructionSettings.from_dict(changes, source="run.yaml")
     assert words in str(e.value) and "\n" not in str(e.value)
+
+
+def test_hex_array_lenslets_have_six_neighbours_at_one_pitch():
+    from napari_ssdpc.physics.lattice import Grid
+
+    optics = Optics.paper().replace(grid="hex")
+    a = np.array([ln.a_um for ln in optics.lenslets()])
+    d = np.hypot(*(a[:, None, :] - a[None, :, :]).transpose(2, 0, 1))
+    np.fill_diagonal(d, np.inf)
+    assert np.allclose(d.min(axis=1), optics.pitch_um)
+    inner = np.hypot(*a.T) < optics.pupil_radius_mla_um - 1.5 * optics.pitch_um
+    assert inner.any() and (np.isclose(d[inner], optics.pitch_um).sum(axis=1) == 6).all()
+    grid = Grid.nominal(optics, rotation_deg=2.0)
+    assert Grid.from_dict(grid.to_dict()) == grid and grid.lattice == "hex"
+    ln = optics.lenslets()[5]
+    centre = grid.lattice_px(ln.row, ln.col)  # the sensor position agrees with a_um (axis at the vertex)
+    expect = (
+        np.asarray(grid.axis_px) + grid.matrix @ np.asarray(ln.a_um) / optics.pixel_um * grid.pitch_px / optics.pitch_px
+    )
+    assert np.allclose(centre, expect)

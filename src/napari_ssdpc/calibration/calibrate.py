@@ -35,7 +35,7 @@ from napari_ssdpc.calibration.result import CALIBRATION_FORMAT, CALIBRATION_VERS
 from napari_ssdpc.calibration.views import extract_views, insert_views
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.physics.lattice import Grid, xy_pair
-from napari_ssdpc.settings.optics import Lenslet, Optics, circle_overlap_fraction
+from napari_ssdpc.settings.optics import Lenslet, Optics, circle_overlap_fraction, lattice_cell
 
 __all__ = [
     "CALIBRATION_FORMAT",
@@ -181,13 +181,13 @@ def _outshone(img, xy, n, radius):
     return out
 
 
-def _lattice(xy, n, sig, pitch, flip, usable):
+def _lattice(xy, n, sig, pitch, flip, usable, cell):
     """Affine lattice through the usable measured centres (weights 1/σ²), without outliers.
 
     Returns the lattice, the residuals (K, 2) and a mask of the trusted centres."""
     w = 1.0 / np.maximum(sig, 2e-4 * pitch) ** 2
     trusted = usable.copy() if usable.sum() >= MIN_EIS else np.ones(len(xy), bool)
-    lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted])
+    lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted], cell)
     res = xy - lat.centres(n)
     for _ in range(3):
         rr = np.hypot(res[:, 0], res[:, 1])
@@ -195,7 +195,7 @@ def _lattice(xy, n, sig, pitch, flip, usable):
         if new.sum() < MIN_EIS or np.array_equal(new, trusted):
             break
         trusted = new
-        lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted])
+        lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted], cell)
         res = xy - lat.centres(n)
     return lat, res, trusted
 
@@ -249,7 +249,11 @@ def calibrate(frame, optics: Optics, *, kind: str = "auto", guess=None) -> Calib
     measured = _measure_disks(img, cand, r0, pitch0)
     circles = [c for c, _ in measured]
     lat, n_idx, on = assign(
-        np.array([c.centre for c in circles]).reshape(-1, 2), np.array([s for _, s in measured]), pitch0, flip
+        np.array([c.centre for c in circles]).reshape(-1, 2),
+        np.array([s for _, s in measured]),
+        pitch0,
+        flip,
+        lattice_cell(optics.grid),
     )
     circles = [c for c, keep in zip(circles, on) if keep]
     circles, n_idx, bright = _all_rims(img, lat, circles, n_idx)
@@ -257,7 +261,7 @@ def calibrate(frame, optics: Optics, *, kind: str = "auto", guess=None) -> Calib
     # a neighbour's skirt pulls some rims; the soft-disk fit models it on EIs that are not small
     reliable = ~_outshone(img, xy, n_idx, float(np.median(radii)))
     reliable |= held & (float(np.median(radii)) >= SMALL_EI_PX)
-    lat, res, trusted = _lattice(xy, n_idx, sig, lat.pitch, flip, reliable)
+    lat, res, trusted = _lattice(xy, n_idx, sig, lat.pitch, flip, reliable, lat.cell)
     _check_prior(lat, float(np.median(radii[trusted])), optics)
     r_ei = float(np.median(radii[trusted]))
     rms = float(np.sqrt(np.mean(np.sum(res[trusted] ** 2, axis=1))))
@@ -382,7 +386,8 @@ def _make_grid(lat: AffineLattice, axis, optics) -> tuple[Grid, np.ndarray]:
     lattice index of lenslet (row 0, col 0)."""
     shift = np.rint(lat.index(axis) + 0.5)  # axis in vertex units (vertex of cell n at n − ½)
     vertex = lat.centres(shift - 0.5)
-    grid = Grid(xy_pair(axis), xy_pair(vertex), float(lat.pitch), float(lat.theta_deg), optics.flip_x, optics.flip_y)
+    flips = (optics.flip_x, optics.flip_y)
+    grid = Grid(xy_pair(axis), xy_pair(vertex), float(lat.pitch), float(lat.theta_deg), *flips, optics.grid)
     return grid, shift
 
 

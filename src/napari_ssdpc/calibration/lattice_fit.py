@@ -5,12 +5,16 @@ be quite orthogonal (a shear). The lattice here is affine, ``centre(n) = origin 
 with n = (col, row) and a general 2 x 2 ``M`` whose columns are the sensor steps of one
 column and one row. Each lenslet keeps its own measured centre; the lattice labels the
 lenslets, fills in those that could not be measured and gives the deviations.
+
+The array's unit cell C (``settings.optics.lattice_cell``: square, or hex with rows offset by
+half a pitch) is divided out before pitch, rotation, shear and aspect are read:
+``M C⁻¹ = p R F`` for a perfect array, so a hex array shows no shear.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -26,6 +30,7 @@ class AffineLattice:
     origin: np.ndarray
     M: np.ndarray
     flip: np.ndarray  # diag(±1, ±1) of the optics (the camera's mirroring)
+    cell: np.ndarray = field(default_factory=lambda: np.eye(2))  # the unit cell C, in pitches
 
     def centres(self, n) -> np.ndarray:
         return self.origin + np.asarray(n, float) @ self.M.T
@@ -34,9 +39,14 @@ class AffineLattice:
         return np.linalg.solve(self.M, (np.asarray(xy, float) - self.origin).T).T
 
     @property
+    def similar(self) -> np.ndarray:
+        """M C⁻¹: the sensor image of a square unit step; p R F for a perfect array."""
+        return self.M @ np.linalg.inv(self.cell)
+
+    @property
     def axes_px(self) -> np.ndarray:
-        """Lengths of the two lattice steps (column, row), px."""
-        return np.linalg.norm(self.M, axis=0)
+        """Lengths of the two steps (x, y of the array) of ``similar``, px."""
+        return np.linalg.norm(self.similar, axis=0)
 
     @property
     def pitch(self) -> float:
@@ -46,14 +56,14 @@ class AffineLattice:
     @property
     def theta_deg(self) -> float:
         """Rotation of the nearest similarity (polar decomposition of M F), degrees."""
-        u, _, vt = np.linalg.svd(self.M @ self.flip)
+        u, _, vt = np.linalg.svd(self.similar @ self.flip)
         rot = u @ vt
         return math.degrees(math.atan2(rot[1, 0], rot[0, 0]))
 
     @property
     def shear_deg(self) -> float:
-        """Angle between the two lattice axes minus 90°, degrees."""
-        a, b = self.M[:, 0], self.M[:, 1]
+        """Angle between the array's x and y axes minus 90°, degrees (0 for a perfect square or hex)."""
+        a, b = self.similar[:, 0], self.similar[:, 1]
         cos = abs(float(a @ b)) / float(np.linalg.norm(a) * np.linalg.norm(b))
         return 90.0 - math.degrees(math.acos(min(cos, 1.0)))
 
@@ -67,29 +77,30 @@ class AffineLattice:
 MIN_AFFINE = 12  # with fewer EIs the lattice is a similarity (pitch, rotation): a square
 
 
-def fit_affine(xy, n, flip, weights=None) -> tuple[AffineLattice, np.ndarray]:
+def fit_affine(xy, n, flip, weights=None, cell=None) -> tuple[AffineLattice, np.ndarray]:
     """Weighted least squares of centres xy (K, 2) on indices n (K, 2); returns the
     lattice and the residuals (K, 2) px.
 
     With ``MIN_AFFINE`` or more centres the lattice is affine (6 parameters); with fewer
-    it is a square lattice (origin, pitch, rotation: x = ox + α n'x − β n'y,
-    y = oy + β n'x + α n'y with n' = F n), which extrapolates safely to the dark lenslets."""
+    it is the array's ideal lattice (origin, pitch, rotation: x = ox + α n'x − β n'y,
+    y = oy + β n'x + α n'y with n' = F C n), which extrapolates safely to the dark lenslets."""
     xy, n = np.asarray(xy, float), np.asarray(n, float)
+    cell = np.eye(2) if cell is None else np.asarray(cell, float)
     w = np.sqrt(np.ones(len(xy)) if weights is None else np.asarray(weights, float))
     if len(xy) >= MIN_AFFINE:
         A = np.stack([np.ones(len(n)), n[:, 0], n[:, 1]], 1) * w[:, None]
         sol = np.linalg.lstsq(A, xy * w[:, None], rcond=None)[0]  # (3, 2)
-        lat = AffineLattice(sol[0].copy(), sol[1:].T.copy(), flip)
+        lat = AffineLattice(sol[0].copy(), sol[1:].T.copy(), flip, cell)
     else:
-        nf = n @ flip.T
+        nf = n @ (flip @ cell).T
         one, zero = np.ones(len(n)), np.zeros(len(n))
         A = np.concatenate(
             [np.stack([one, zero, nf[:, 0], -nf[:, 1]], 1), np.stack([zero, one, nf[:, 1], nf[:, 0]], 1)]
         )
         ww = np.concatenate([w, w])
         sol = np.linalg.lstsq(A * ww[:, None], np.concatenate([xy[:, 0], xy[:, 1]]) * ww, rcond=None)[0]
-        M = np.array([[sol[2], -sol[3]], [sol[3], sol[2]]]) @ flip
-        lat = AffineLattice(sol[:2].copy(), M, flip)
+        M = np.array([[sol[2], -sol[3]], [sol[3], sol[2]]]) @ flip @ cell
+        lat = AffineLattice(sol[:2].copy(), M, flip, cell)
     return lat, xy - lat.centres(n)
 
 
@@ -98,13 +109,15 @@ def _rot(theta_deg):
     return np.array([[math.cos(t), -math.sin(t)], [math.sin(t), math.cos(t)]])
 
 
-def _basis(xy, pitch0):
-    """Two lattice step vectors (sensor px) from the vectors between neighbouring EIs
-    (those within 25 % of the optics' pitch ``pitch0``).
+def _basis(xy, pitch0, flip, cell):
+    """The lattice matrix M (sensor steps of one column and one row) from the vectors
+    between neighbouring EIs (those within 25 % of the optics' pitch ``pitch0``).
 
-    The angles of the neighbour vectors, folded modulo 90°, give the rotation θ in
-    (−45°, 45°]; vectors near θ and θ + 90° (either sign) then give each axis separately,
-    so unequal axes and a shear come out as they are."""
+    A square array repeats every 90°, a hex array every 60°: the neighbour-vector angles,
+    folded by that period, give the rotation θ within ±45° (square) or ±30° (hex). The
+    ideal steps p R(θ) F C then pick, for each of the two steps, the neighbour vectors
+    within a third of the period of it (either sign), whose median is the measured step:
+    unequal axes and a shear come out as they are."""
     d = xy[None, :, :] - xy[:, None, :]
     dist = np.hypot(d[..., 0], d[..., 1])
     np.fill_diagonal(dist, np.inf)
@@ -113,22 +126,19 @@ def _basis(xy, pitch0):
         raise SsdpcError("the elemental images do not form a lattice; check that the frame is a raw light-field frame")
     vec = d[sel]
     phi = np.arctan2(vec[:, 1], vec[:, 0])
-    theta = float(np.angle(np.mean(np.exp(4j * phi)))) / 4
-    k = np.rint((phi - theta) / (math.pi / 2)).astype(int) % 4
-    axes = []
-    for along, against in ((0, 2), (1, 3)):
-        v = np.concatenate([vec[k == along], -vec[k == against]])
-        axes.append(np.median(v, axis=0) if len(v) else None)
-    if axes[0] is None and axes[1] is None:
-        raise SsdpcError("the elemental images do not form a lattice; check that the frame is a raw light-field frame")
-    if axes[0] is None:
-        axes[0] = _rot(-90) @ axes[1]
-    if axes[1] is None:
-        axes[1] = _rot(90) @ axes[0]
-    return np.stack(axes, 1)
+    fold = 6 if abs(cell[0, 1]) > 1e-9 else 4  # hex: six neighbours
+    theta = float(np.angle(np.mean(np.exp(1j * fold * phi)))) / fold
+    ideal = pitch0 * _rot(math.degrees(theta)) @ flip @ cell
+    M = ideal.copy()
+    for j in range(2):
+        cos = (vec @ ideal[:, j]) / (np.hypot(vec[:, 0], vec[:, 1]) * pitch0)
+        near = np.abs(cos) > math.cos(2 * math.pi / fold / 3)
+        if near.any():
+            M[:, j] = np.median(vec[near] * np.sign(cos[near])[:, None], axis=0)
+    return M
 
 
-def assign(xy, strength, pitch0, flip) -> tuple[AffineLattice, np.ndarray, np.ndarray]:
+def assign(xy, strength, pitch0, flip, cell=None) -> tuple[AffineLattice, np.ndarray, np.ndarray]:
     """Lattice indices of the EI centres ``xy`` (K, 2).
 
     Indices are rounded from the neighbour-vector basis around the strongest EI, then the
@@ -142,8 +152,8 @@ def assign(xy, strength, pitch0, flip) -> tuple[AffineLattice, np.ndarray, np.nd
             f"only {len(xy)} elemental image(s) found, at least {MIN_EIS} are needed to fix the "
             "lattice; calibrate on a white frame taken with the condenser fully open"
         )
-    B = _basis(xy, pitch0)
-    lat = AffineLattice(xy[int(np.argmax(strength))].copy(), B @ flip, flip)
+    cell = np.eye(2) if cell is None else np.asarray(cell, float)
+    lat = AffineLattice(xy[int(np.argmax(strength))].copy(), _basis(xy, pitch0, flip, cell), flip, cell)
     on = np.ones(len(xy), bool)
     n = np.rint(lat.index(xy))
     for _ in range(4):
@@ -152,7 +162,7 @@ def assign(xy, strength, pitch0, flip) -> tuple[AffineLattice, np.ndarray, np.nd
         on = np.hypot(res[:, 0], res[:, 1]) < 0.2 * lat.pitch
         if on.sum() < MIN_EIS:
             break
-        new, _ = fit_affine(xy[on], n[on], flip)
+        new, _ = fit_affine(xy[on], n[on], flip, cell=cell)
         if np.allclose(new.M, lat.M, atol=1e-6 * lat.pitch) and np.allclose(new.origin, lat.origin, atol=1e-6):
             lat = new
             break

@@ -48,8 +48,9 @@ def check_optics_match(optics, cal, source: str = "--optics") -> None:
     Raises
     ------
     SsdpcError
-        Magnification, MLA pitch, pixel size or wavelength differ by more than 1 %, or the
-        measured pitch differs from the optics' by more than 3 %.
+        Magnification, MLA pitch, pixel size or wavelength differ by more than 1 %, the array
+        lattice (square or hex) differs, or the measured pitch differs from the optics' by more
+        than 3 %.
     """
     for what, attr, unit in (
         ("objective magnification", "magnification", "x"),
@@ -63,6 +64,11 @@ def check_optics_match(optics, cal, source: str = "--optics") -> None:
                 f"the optics ({source}) and the calibration disagree on the {what} ({a:g}{unit} vs {b:g}{unit}); "
                 "recalibrate with these optics (`ssdpc calibrate WHITE.tif --optics ...`) or use the matching file"
             )
+    if optics.grid != cal.grid.lattice:
+        raise SsdpcError(
+            f"the optics ({source}) give a {optics.grid} array (mla.grid) but the calibration was made for a "
+            f"{cal.grid.lattice} one; set mla.grid: {cal.grid.lattice} or recalibrate with these optics"
+        )
     measured, expected = float(cal.grid.pitch_px), float(optics.pitch_px)
     if abs(measured - expected) > 0.03 * expected:
         raise SsdpcError(

@@ -14,11 +14,11 @@ an in-focus object point at (x, y) µm appears at ``centre + A @ (x, y) * M_EI /
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from napari_ssdpc.settings.optics import Lenslet, Optics
+from napari_ssdpc.settings.optics import Lenslet, Optics, lattice_cell
 
 
 @dataclass(frozen=True)
@@ -31,6 +31,7 @@ class Grid:
     rotation_deg: float = 0.0
     flip_x: bool = False
     flip_y: bool = False
+    lattice: str = "square"  # the array's unit cell: "square" or "hex" (settings.optics.lattice_cell)
 
     @classmethod
     def nominal(cls, optics: Optics, axis_px=None, axis_offset_px=(0.0, 0.0), rotation_deg=0.0, pitch_px=None) -> Grid:
@@ -45,10 +46,11 @@ class Grid:
             float(rotation_deg),
             optics.flip_x,
             optics.flip_y,
+            optics.grid,
         )
         off = g.matrix @ np.asarray(axis_offset_px, dtype=float)
         vertex = np.asarray(g.axis_px) - off
-        return cls(g.axis_px, (float(vertex[0]), float(vertex[1])), g.pitch_px, g.rotation_deg, g.flip_x, g.flip_y)
+        return replace(g, vertex_px=(float(vertex[0]), float(vertex[1])))
 
     @property
     def matrix(self) -> np.ndarray:
@@ -61,7 +63,7 @@ class Grid:
     def lattice_px(self, row, col) -> np.ndarray:
         """Sensor position (x, y) of the lenslet centre(s) with lattice index (row, col)."""
         row, col = np.broadcast_arrays(np.asarray(row, float), np.asarray(col, float))
-        d = np.stack([(col + 0.5) * self.pitch_px, (row + 0.5) * self.pitch_px], axis=-1)
+        d = np.stack([col + 0.5, row + 0.5], axis=-1) @ (self.pitch_px * lattice_cell(self.lattice)).T
         return np.asarray(self.vertex_px) + d @ self.matrix.T
 
     def axis_offset_px(self) -> np.ndarray:
@@ -91,6 +93,7 @@ class Grid:
             "rotation_deg": self.rotation_deg,
             "flip_x": self.flip_x,
             "flip_y": self.flip_y,
+            "lattice": self.lattice,
         }
 
     @classmethod
@@ -102,6 +105,7 @@ class Grid:
             float(d.get("rotation_deg", 0.0)),
             bool(d.get("flip_x", False)),
             bool(d.get("flip_y", False)),
+            str(d.get("lattice", "square")),
         )
 
 

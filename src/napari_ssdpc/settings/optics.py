@@ -38,9 +38,33 @@ __all__ = [
     "Optics",
     "Sensor",
     "circle_overlap_fraction",
+    "lattice_cell",
 ]
 
 GRIDS = ("square", "hex")
+
+
+def lattice_cell(grid: str = "square") -> np.ndarray:
+    """The unit cell of a lenslet array, in pitches, in the MLA frame (x right, y down).
+
+    Parameters
+    ----------
+    grid : {"square", "hex"}
+
+    Returns
+    -------
+    ndarray, (2, 2)
+        Columns: the step of one column and of one row. Square: (1, 0) and (0, 1). Hex: (1, 0)
+        and (1/2, √3/2), so that each row is offset by half a pitch and every lenslet has six
+        neighbours at one pitch.
+    """
+    if grid == "hex":
+        return np.array([[1.0, 0.5], [0.0, math.sqrt(3.0) / 2.0]])
+    if grid == "square":
+        return np.eye(2)
+    raise SsdpcError(f"grid must be one of {', '.join(GRIDS)}, got {grid!r}")
+
+
 #: The four halves of paper Eq. 5, by the sign of the lenslet position a (x right, y down):
 #: "up" = a_y < 0, "down" = a_y > 0, "left" = a_x < 0, "right" = a_x > 0.
 HALVES = ("up", "down", "left", "right")
@@ -53,8 +77,9 @@ class Lenslet:
     """One lenslet that overlaps the objective pupil.
 
     ``row``/``col`` index the lattice: the lenslet centre sits at
-    ``((col + 0.5) p, (row + 0.5) p)`` from the reference lattice vertex, so the four
-    central lenslets are (-1,-1), (-1,0), (0,-1) and (0,0). ``a_um`` is the centre
+    ``p C (col + 0.5, row + 0.5)`` from the reference lattice vertex, with C the unit cell of
+    :func:`lattice_cell` (the identity for a square array, so ``((col + 0.5) p, (row + 0.5) p)``
+    and the four central lenslets are (-1,-1), (-1,0), (0,-1) and (0,0)). ``a_um`` is the centre
     measured from the optical axis in the MLA plane (x right, y down), ``u`` the
     sub-aperture centre frequency (cycles/µm), ``fraction`` the part of the lenslet
     aperture inside the objective pupil.
@@ -460,13 +485,15 @@ class Optics(SettingsModel):
         list of Lenslet
         """
         p = self.pitch_um
+        cell = lattice_cell(self.grid) * p
         ox, oy = (float(v) for v in axis_offset_um)
-        n = int(math.ceil((self.pupil_radius_mla_um + self.lenslet_radius_um) / p)) + 1
-        idx = np.arange(-n - 1, n + 1)
+        # every index whose lenslet can reach the pupil (rows of a hex array are skewed: wider column range)
+        reach = (self.pupil_radius_mla_um + self.lenslet_radius_um + math.hypot(ox, oy)) / cell[1, 1]
+        n = int(math.ceil(reach)) + 2
         out = []
-        for row in idx:
-            for col in idx:
-                ax, ay = (col + 0.5) * p - ox, (row + 0.5) * p - oy
+        for row in np.arange(-n, n):
+            for col in np.arange(-2 * n, 2 * n):
+                ax, ay = (float(v) for v in cell @ (col + 0.5, row + 0.5) - (ox, oy))
                 frac = float(
                     circle_overlap_fraction(math.hypot(ax, ay), self.lenslet_radius_um, self.pupil_radius_mla_um)
                 )

@@ -19,7 +19,7 @@ from scipy import ndimage
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.lattice import Grid
-from napari_ssdpc.settings.optics import Lenslet, Optics, circle_overlap_fraction
+from napari_ssdpc.settings.optics import Lenslet, Optics, circle_overlap_fraction, lattice_cell
 
 
 @dataclass(frozen=True)
@@ -54,7 +54,8 @@ class ArrayErrors:
         rng = np.random.default_rng([self.seed, row + 10_000, col + 10_000])
         r = self.offset_frac * grid.pitch_px * math.sqrt(rng.uniform())
         phi = rng.uniform(0, 2 * math.pi)
-        shear = np.array([(row + 0.5) * math.tan(math.radians(self.shear_deg)) * grid.pitch_px, 0.0])
+        y_ideal = (row + 0.5) * lattice_cell(grid.lattice)[1, 1] * grid.pitch_px  # the row's height
+        shear = np.array([y_ideal * math.tan(math.radians(self.shear_deg)), 0.0])
         return grid.matrix @ shear + r * np.array([math.cos(phi), math.sin(phi)])
 
     def apply(self, grid: Grid, lenslets: list[Lenslet], optics: Optics) -> tuple[list[Lenslet], np.ndarray]:

@@ -408,8 +408,10 @@ def _render(coeffs, centres, optics, sampling, grid, camera):
     pix = np.sinc(g0) * np.sinc(g1)
     axis_aligned = abs(A[0, 1]) < 1e-12 and abs(A[1, 0]) < 1e-12
     # EI patch: as far as the periodic object grid allows (the diffraction tails of the
-    # field stop reach well past the EI), faded out over its last TAPER_PX pixels
-    half = (0.5 * L - 1.0) / (s if axis_aligned else s * math.sqrt(2))
+    # field stop reach well past the EI), faded out over its last TAPER_PX pixels. A rotated
+    # patch is faded on the grid's inscribed circle (object radius L/2), so it holds the whole
+    # field stop in every direction and nothing from the next period.
+    half = (0.5 * L - 1.0) / s
     for (cx, cy), c in zip(centres, coeffs):
         X = np.arange(max(0, math.ceil(cx - half)), min(W, math.floor(cx + half) + 1))
         Y = np.arange(max(0, math.ceil(cy - half)), min(H, math.floor(cy + half) + 1))
@@ -431,7 +433,10 @@ def _render(coeffs, centres, optics, sampling, grid, camera):
             fine = _fourier_eval(cc, f, gy, gx)
             img = ndimage.map_coordinates(fine, [(oy - gy[0]) / step, (ox - gx[0]) / step], order=3, mode="nearest")
         img = img * camera.illumination(np.hypot(ox, oy), optics.field_radius_um)
-        img *= _fade(Y - cy, half)[:, None] * _fade(X - cx, half)[None, :]
+        if axis_aligned:
+            img *= _fade(Y - cy, half)[:, None] * _fade(X - cx, half)[None, :]
+        else:
+            img *= _fade(np.hypot(ox, oy) / s, half)
         frame[Y[0] : Y[-1] + 1, X[0] : X[-1] + 1] += img
     return np.clip(frame, 0.0, None)
 
