@@ -51,3 +51,16 @@ def test_nothing_cites_files_outside_the_repository():
         text = path.read_text(encoding="utf-8")
         found = [w for w in words if w in text]
         assert not found, f"{path.relative_to(root)} cites {found}"
+
+
+def test_the_build_can_read_the_version():
+    """hatchling reads ``__version__`` from _version.py with a regex: it must be a plain literal."""
+    import re
+    import tomllib
+
+    root = PKG.parents[1]
+    config = tomllib.loads((root / "pyproject.toml").read_text())
+    source = (root / config["tool"]["hatch"]["version"]["path"]).read_text()
+    found = re.search(r"""^__version__\s*=\s*["']([^"']+)["']""", source, re.MULTILINE)
+    assert found is not None, "_version.py must hold __version__ = '<x.y.z>' as a literal"
+    assert re.fullmatch(r"\d+\.\d+\.\d+", found.group(1))
