@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.fft as sfft
 
 from napari_ssdpc.physics import transfer
-from napari_ssdpc.reconstruction.regularised import TvInversion
+from napari_ssdpc.reconstruction.forward import ViewModel
+from napari_ssdpc.reconstruction.regularised import TvInversion, padded_planes
 from napari_ssdpc.settings.optics import Optics
 
 
@@ -18,28 +20,27 @@ def setup():
     z = np.arange(-10.0, 10.1, 2.0)
     yy, xx = np.mgrid[:64, :64]
     mask = np.hypot(yy - 32, xx - 32) < 30
-    tv = TvInversion(optics, lenslets, shape, pixel, z, mask=mask)
+    r_z = 20.0
+    zs, planes = padded_planes(z, r_z)
+    tv = TvInversion(ViewModel(optics, lenslets, shape, pixel, zs), planes, r_z, mask=mask)
     return tv, mask, z
 
 
 def _forward(tv, phi):
     """Views' contrast (K, ny, nx) of a phase volume on the requested planes, noise free."""
+    model = tv.model
     full = np.zeros((tv.nz,) + tv.shape, np.float32)
-    full[tv.pad : tv.pad + phi.shape[0]] = phi
-    import scipy.fft as sfft
-
-    band = tv.forward_band(sfft.fftn(full, norm="ortho"))
-    spec = np.zeros((band.shape[0],) + tv.shape, np.complex64)
-    spec[:, tv._iy, tv._ix] = band
-    return (sfft.ifft2(spec, norm="ortho").real / tv.w[:, None, None]).astype(np.float32)
+    full[tv.planes] = phi
+    band = model.forward(model.take(sfft.rfft2(full, norm="ortho")))  # (P, K)
+    return model.images(band) / model.w[:, None, None]
 
 
 def test_noise_is_measured_beyond_the_band(setup):
     tv, mask, _ = setup
     rng = np.random.default_rng(0)
     sigma = 0.01
-    noise = rng.normal(0, sigma, (len(tv.w),) + tv.shape).astype(np.float32) * mask
-    estimate = tv.noise(tv.spectra(noise / tv.w[:, None, None]))
+    noise = rng.normal(0, sigma, (tv.model.n_views,) + tv.shape).astype(np.float32) * mask
+    estimate = tv.noise(noise / tv.model.w[:, None, None])
     assert estimate == pytest.approx(sigma, rel=0.1)
 
 
@@ -50,7 +51,7 @@ def test_a_positive_blob_is_recovered_at_its_depth_and_with_its_sign(setup):
     blob = (np.hypot(yy - 30, xx - 36) < 4).astype(np.float32) * 0.2
     iz = int(np.argmin(abs(z - 4.0)))
     phi[iz - 1 : iz + 2] = blob
-    c = _forward(tv, phi) + np.random.default_rng(1).normal(0, 1e-3, (len(tv.w),) + tv.shape).astype(np.float32)
+    c = _forward(tv, phi) + np.random.default_rng(1).normal(0, 1e-3, (tv.model.n_views,) + tv.shape).astype(np.float32)
     out, report = tv.phase(c * mask, sign="auto", phi_max=1.0, iterations=60)
     assert report.sign.startswith("auto: denser")
     assert out.min() >= 0 and out.max() <= 1.0 and np.all(out[:, ~mask] == 0)  # the constraints hold
@@ -66,4 +67,4 @@ def test_bad_sign_is_one_line(setup):
 
     tv, _, _ = setup
     with pytest.raises(SsdpcError, match="use one of auto, denser, lighter, any"):
-        tv.phase(np.zeros((len(tv.w),) + tv.shape, np.float32), sign="up")
+        tv.phase(np.zeros((tv.model.n_views,) + tv.shape, np.float32), sign="up")

@@ -64,6 +64,16 @@ class Band:
             return cls.full((p, q))
         return cls((p, q), r, c)
 
+    @classmethod
+    def box(cls, shape, m) -> Band:
+        """The rfft2 half of a centred box of m = (my, mx) frequencies (odd; unshifted order
+        −(m−1)/2 … (m−1)/2); the full grid if the box reaches the grid's size."""
+        p, q = (int(v) for v in shape)
+        my, mx = (int(v) for v in m)
+        if my >= p or mx >= q:
+            return cls.full((p, q))
+        return cls((p, q), (my - 1) // 2, (mx - 1) // 2 + 1)
+
     @property
     def is_full(self) -> bool:
         return self.r >= self.shape[0]

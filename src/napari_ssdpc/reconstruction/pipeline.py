@@ -41,7 +41,8 @@ from napari_ssdpc.physics.psf import LensletPSF
 from napari_ssdpc.reconstruction.backend import get_backend
 from napari_ssdpc.reconstruction.deconvolution import Band, MultiViewRL
 from napari_ssdpc.reconstruction.dpc import dpc_image, phase_to_delta_n, refractive_index, tikhonov_phase
-from napari_ssdpc.reconstruction.regularised import TvInversion
+from napari_ssdpc.reconstruction.forward import ViewModel
+from napari_ssdpc.reconstruction.regularised import TvInversion, padded_planes
 from napari_ssdpc.reconstruction.wotf import WotfInversion
 from napari_ssdpc.settings.optics import HALVES, PAIRS, Optics
 from napari_ssdpc.settings.reconstruction import DEFAULT_ALPHA, PHASE_METHODS, TRANSFER_MODELS, ReconstructionSettings
@@ -224,27 +225,17 @@ class Reconstructor:
     def _build_operators(self, progress):
         if self.with_stacks:
             self._build_rl(progress)
-        if self.method in ("wotf", "tv"):
-            self.wotf = WotfInversion(
-                self.optics,
-                self.lenslets,
-                self.mask.shape,
-                self.pixel_um,
-                self.z_um,
-                self.alpha,
-                i0=self.level[self.lit],
-            )
+        if self.method not in ("wotf", "tv"):
+            return
+        # one model of the views for both phase methods; the TV solve adds planes beyond the range
+        r_z = float(design(self.optics)["r_z_ffl_um"])
+        zs, planes = padded_planes(self.z_um, r_z) if self.method == "tv" else (self.z_um, slice(None))
+        model = ViewModel(
+            self.optics, self.lenslets, self.mask.shape, self.pixel_um, zs, i0=self.level[self.lit], progress=progress
+        )
+        self.wotf = WotfInversion(model.planes(planes), self.alpha)
         if self.method == "tv":
-            self.tv = TvInversion(
-                self.optics,
-                self.lenslets,
-                self.mask.shape,
-                self.pixel_um,
-                self.z_um,
-                i0=self.level[self.lit],
-                mask=self.mask,
-                progress=progress,
-            )
+            self.tv = TvInversion(model, planes, r_z, mask=self.mask)
 
     def _build_rl(self, progress):
         opt = self.optics

@@ -1,6 +1,6 @@
 """3D phase with total variation and physical constraints: the 'tv' method.
 
-The views' contrast c_k obeys the same first-order model as in :mod:`.wotf` (paper Eqs. 2-4):
+The views' contrast c_k obeys the first-order model of :mod:`.forward` (paper Eqs. 2-4):
 per lateral frequency u, ĉ_k(u) = Σ_z H_k(u; z)/I0_k · φ̂_z(u). With a handful of views this
 leaves a missing cone along z, and the phase WOTFs vanish at u = 0, so the mean of every slice
 is not measured at all. A linear (Tikhonov) inverse fills those gaps with zeros: objects come out
@@ -19,11 +19,10 @@ Optica 2016; ADMM after Boyd et al., Found. Trends Mach. Learn. 2011): z₁ = D�
 z₂ = φ (the constraints). The φ-step is solved exactly: in the 3D Fourier domain DᴴD and I are
 diagonal and the data term is K x Z per lateral frequency, so with the Woodbury identity every
 frequency costs one K x K product (the inverses are built once, like the Tikhonov operators).
+Because φ is real, everything runs on the half spectrum of a real 3D FFT, and the products are
+batched over the band's frequencies (``np.matmul`` on contiguous (P, K, Z) arrays).
 
-The z grid is padded by a few resolution lengths on each side: a padding plane may hold what the
-views see of objects beyond the requested range (it is cropped from the output), so that those
-objects do not pile up in the end planes, and the padding decouples the two ends, which the
-FFT along z would otherwise join.
+The z grid is padded by about one axial resolution length on each side (:func:`padded_planes`).
 
 λ follows the noise. Beyond |u| = 2ρ (ρ the sub-aperture radius in frequency) no intensity
 image of the instrument has any content, so the spectrum of each view out there is its noise; λ
@@ -40,11 +39,9 @@ import numpy as np
 import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
-from napari_ssdpc.physics import transfer
-from napari_ssdpc.physics.design import design
-from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.reconstruction.forward import ViewModel
 
-__all__ = ["LAMBDA_PER_NOISE", "SIGNS", "TvInversion", "TvReport"]
+__all__ = ["LAMBDA_PER_NOISE", "SIGNS", "TvInversion", "TvReport", "padded_planes"]
 
 SIGNS = ("auto", "denser", "lighter", "any")
 #: ℓ of the sparsity term μ‖φ‖₁ with μ = λ/ℓ, in units of the axial resolution R_z: without it a
@@ -114,128 +111,150 @@ class TvReport:
         }
 
 
-class TvInversion:
-    """Operators of the TV-regularised inversion, built once per optics, lenslets, views and z grid.
+def padded_planes(z_um, r_z_um: float, pad_um: float | None = None) -> tuple[np.ndarray, slice]:
+    """The z grid the TV solve runs on: ``z_um`` padded beyond each end, to a fast FFT length.
+
+    A padding plane may hold what the views see of objects beyond the requested range (it is
+    cropped from the output), so that those objects do not pile up in the end planes, and the
+    padding decouples the two ends, which the FFT along z would otherwise join.
 
     Parameters
     ----------
-    optics : Optics
-    lenslets : list of Lenslet
-        The lit lenslets, in the order of the views.
-    shape : tuple of int
-        (ny, nx) of a view, px.
-    pixel_um : float
-        Object-side pixel of the views, µm.
     z_um : array_like, shape (Z,)
-        Slab centres, µm (evenly spaced).
-    i0 : array_like, shape (K,), optional
-        Each view's measured direct light (flat frame); the model's by default. Sets the noise
-        weights, as in :class:`~napari_ssdpc.reconstruction.wotf.WotfInversion`.
+        The requested slab centres, µm (evenly spaced).
+    r_z_um : float
+        Axial resolution, µm: the default padding on each side.
+    pad_um : float, optional
+        Padding on each side, µm (at least 4 planes).
+
+    Returns
+    -------
+    zs : ndarray, shape (Z + padding,)
+        The padded grid, µm.
+    planes : slice
+        Where ``z_um`` lies in ``zs``.
+    """
+    z_um = np.atleast_1d(np.asarray(z_um, float))
+    if len(z_um) < 2:
+        return z_um, slice(0, len(z_um))
+    dz = float(z_um[1] - z_um[0])
+    pad = max(4, int(math.ceil((r_z_um if pad_um is None else pad_um) / dz)))
+    nz = sfft.next_fast_len(len(z_um) + 2 * pad)  # the z FFTs run on every iteration
+    lo = (nz - len(z_um)) // 2
+    return z_um[0] + dz * (np.arange(nz) - lo), slice(lo, lo + len(z_um))
+
+
+class TvInversion:
+    """The TV-regularised inversion of a :class:`~napari_ssdpc.reconstruction.forward.ViewModel`.
+
+    Parameters
+    ----------
+    model : ViewModel
+        The views' model on the padded z grid of :func:`padded_planes`.
+    planes : slice
+        The requested planes within the model's (the output).
+    r_z_um : float
+        Axial resolution, µm: sets the sparsity length (``SPARSITY_PER_RZ``).
     mask : ndarray of bool, shape (ny, nx), optional
         The field stop: Δn = 0 outside.
-    pad_um : float, optional
-        Padding beyond each end of the z range, µm (default: one axial resolution length,
-        at least 4 planes).
-    progress : callable, optional
-        ``progress(done, total, stage)`` while the operators are built.
     """
 
-    def __init__(
-        self, optics: Optics, lenslets, shape, pixel_um, z_um, *, i0=None, mask=None, pad_um=None, progress=None
-    ):
-        z_um = np.atleast_1d(np.asarray(z_um, float))
-        self.z_um = z_um
-        self.dz = float(z_um[1] - z_um[0]) if len(z_um) > 1 else 1.0
-        self.shape = tuple(int(n) for n in shape)
-        self.voxel = (self.dz, float(pixel_um), float(pixel_um))
-        setup = transfer._LensletSetup(optics, lenslets, shape, float(pixel_um))
-        i0_model = setup.i0
-        if np.any(i0_model <= 0):
-            raise SsdpcError("a view without direct light cannot be inverted; leave dark-field lenslets out")
-        i0 = np.asarray(i0_model if i0 is None else i0, float)
-        self.w = np.sqrt(i0 / i0.max()).astype(np.float32)  # sqrt of the shot-noise weights
-        r_z = float(design(optics)["r_z_ffl_um"])
-        self.sparsity_um = SPARSITY_PER_RZ * r_z
-        if pad_um is None:
-            pad_um = r_z  # one axial resolution length
-        self.pad = max(4, int(math.ceil(pad_um / self.dz))) if len(z_um) > 1 else 0
-        nz = len(z_um) + 2 * self.pad
-        self.nz = nz
-        zs = z_um[0] + self.dz * (np.arange(nz) - self.pad)
+    def __init__(self, model: ViewModel, planes: slice, r_z_um: float, *, mask=None):
+        self.model = model
+        z = model.z_um
+        self.nz = nz = len(z)
+        self.planes = planes
+        self.z_um = z[planes]
+        self.dz = float(z[1] - z[0]) if nz > 1 else 1.0
+        self.shape = model.shape
+        self.voxel = (self.dz, model.pixel_um, model.pixel_um)
+        self.sparsity_um = SPARSITY_PER_RZ * float(r_z_um)
         self.mask = np.ones(self.shape, bool) if mask is None else np.asarray(mask, bool)
-        iy, ix = (transfer._fft_indices(m) % n for m, n in zip(setup.m_out, self.shape))
-        self._iy, self._ix = iy[:, None], ix[None, :]
-        self.band_shape = tuple(setup.m_out)
-        k = len(i0)
-        weight = (self.w / i0_model)[:, None, None, None]
-        h = np.empty((k, nz) + self.band_shape, np.complex64)  # (K, Z, band): the data operator
-        chunk = 16
-        for start in range(0, nz, chunk):
-            _, hp = setup.band(zs[start : start + chunk])  # (z, K, band)
-            h[:, start : start + chunk] = np.swapaxes(hp, 0, 1) * weight
-            if progress is not None:
-                progress(min(start + chunk, nz), nz, "TV operators")
-        self.data_scale = float(np.max(np.sum(np.abs(h) ** 2, axis=(0, 1)))) / nz
-        # the same operator on the z frequencies of a unitary DFT along z: Â(kz) = ifft_z(H)
-        self.ah = sfft.ifft(h, axis=1, norm="ortho", workers=-1, overwrite_x=True).astype(np.complex64)
-        del h
+        # the model on the z frequencies of a unitary DFT along z: Â(kz) = ifft_z(A)
+        self.ah = sfft.ifft(model.a, axis=2, norm="ortho", workers=-1).astype(np.complex64)  # (P, K, Z)
+        self.ah_h = np.ascontiguousarray(np.conj(self.ah).transpose(0, 2, 1))  # (P, Z, K)
+        self.data_scale = float(np.max(np.sum(np.abs(model.a) ** 2, axis=(1, 2)))) / nz
         self.rho = RHO_PER_DATA * self.data_scale
-        # eigenvalues of DᴴD (forward differences per µm, periodic) on the padded 3D grid
-        dzz = (2 * np.sin(np.pi * sfft.fftfreq(nz))) ** 2 / self.dz**2
-        dyy = (2 * np.sin(np.pi * sfft.fftfreq(self.shape[0]))) ** 2 / self.voxel[1] ** 2
-        dxx = (2 * np.sin(np.pi * sfft.fftfreq(self.shape[1]))) ** 2 / self.voxel[2] ** 2
-        self._dtd = (dzz[:, None, None] + dyy[None, :, None] + dxx[None, None, :]).astype(np.float32)
-        self._build_inverse()
-
-    def _build_inverse(self):
-        """b = ρ(1 + DᴴD) and, per band frequency, G⁻¹ = (I + Â b⁻¹ Âᴴ)⁻¹ (K x K)."""
-        self.b = (self.rho * (1.0 + self._dtd)).astype(np.float32)  # (kz, ny, nx)
-        binv_band = 1.0 / self.b[:, self._iy, self._ix]  # (kz, band)
-        g = np.einsum("kzyx,zyx,lzyx->yxkl", self.ah, binv_band, np.conj(self.ah), optimize=True)
-        g += np.eye(g.shape[-1], dtype=g.dtype)
-        self.ginv = np.linalg.inv(g).astype(np.complex64)  # (band, K, K)
+        # eigenvalues of DᴴD (forward differences per µm, periodic) on the half spectrum
+        ny, nx = self.shape
+        dzz = (2 * np.sin(np.pi * sfft.fftfreq(nz))) ** 2 / self.voxel[0] ** 2
+        dyy = (2 * np.sin(np.pi * sfft.fftfreq(ny))) ** 2 / self.voxel[1] ** 2
+        dxx = (2 * np.sin(np.pi * np.arange(nx // 2 + 1) / nx)) ** 2 / self.voxel[2] ** 2
+        dtd = dzz[:, None, None] + dyy[None, :, None] + dxx[None, None, :]
+        self.b = (self.rho * (1.0 + dtd)).astype(np.float32)  # (kz, ny, nx//2+1)
+        self.binv_band = np.ascontiguousarray(1.0 / model.take(self.b))  # (P, kz)
+        # per band frequency G⁻¹ = (I + Â b⁻¹ Âᴴ)⁻¹ (K x K), for the Woodbury identity
+        g = np.matmul(self.ah * self.binv_band[:, None, :], self.ah_h)
+        g += np.eye(model.n_views, dtype=g.dtype)
+        self.ginv = np.linalg.inv(g).astype(np.complex64)
+        outside = np.ones(self.b.shape[1:], bool)
+        model.band.put(outside, np.zeros(model.band.box_shape, bool))
+        self._outside = outside
 
     # ------------------------------------------------------------------ pieces
-    def spectra(self, contrast) -> np.ndarray:
-        """Weighted contrast spectra (K, ny, nx), unitary 2D FFT."""
-        c = np.asarray(contrast, np.float32) * self.w[:, None, None]
-        return sfft.fft2(c, norm="ortho", workers=-1)
-
-    def noise(self, spectra) -> float:
+    def noise(self, contrast) -> float:
         """The views' noise (rms per pixel, weighted contrast) from their spectra beyond the band.
 
         Nothing the instrument images lies beyond |u| = 2ρ; the median of |ĉ|² out there is
         robust against the few frequencies the field-stop edge leaks.
         """
-        outside = np.ones(self.shape, bool)
-        outside[self._iy, self._ix] = False
-        if outside.sum() < 16:
+        return self._noise(self._spectra(contrast))
+
+    def _spectra(self, contrast):
+        c = np.asarray(contrast, np.float32) * self.model.w[:, None, None]
+        return sfft.rfft2(c, norm="ortho", workers=-1)  # (K, ny, nx//2+1)
+
+    def _noise(self, spec) -> float:
+        if self._outside.sum() < 8:
             return float("nan")
-        power = np.abs(spectra[:, outside]) ** 2
+        power = np.abs(spec[:, self._outside]) ** 2
         frac = float(self.mask.mean())  # noise lives only inside the field stop
         return float(np.sqrt(np.median(power) / math.log(2) / max(frac, 1e-6)))
 
-    def forward_band(self, phi_hat) -> np.ndarray:
-        """Â φ̂ on the band: (K, band) from φ̂ (kz, ny, nx)."""
-        return np.einsum("kzyx,zyx->kyx", self.ah, phi_hat[:, self._iy, self._ix], optimize=True)
+    def _fft(self, phi):
+        return sfft.rfftn(phi, norm="ortho", workers=-1)
 
-    def _solve(self, rhs_hat) -> np.ndarray:
-        """(ÂᴴÂ + b)⁻¹ r̂ by Woodbury: r̂/b − b⁻¹Âᴴ G⁻¹ Â (r̂/b)."""
+    def _ifft(self, phi_hat):
+        return sfft.irfftn(phi_hat, s=(self.nz,) + self.shape, norm="ortho", workers=-1)
+
+    def _solve(self, rhs_hat):
+        """(ÂᴴÂ + b)⁻¹ r̂ by Woodbury, r̂/b − b⁻¹Âᴴ G⁻¹ Â (r̂/b), and Â of the solution.
+
+        Â of the solution is G⁻¹ Â (r̂/b): Â(x − b⁻¹ÂᴴG⁻¹Âx) = (I − (G − I)G⁻¹)Âx.
+        """
         x = rhs_hat / self.b
-        xb = x[:, self._iy, self._ix]
-        t = np.einsum("kzyx,zyx->kyx", self.ah, xb, optimize=True)
-        t = np.einsum("yxkl,lyx->kyx", self.ginv, t, optimize=True)
-        corr = np.einsum("kzyx,kyx->zyx", np.conj(self.ah), t, optimize=True) / self.b[:, self._iy, self._ix]
-        x[:, self._iy, self._ix] = xb - corr
-        return x
+        model = self.model
+        xb = model.take(x)  # (P, kz)
+        fwd = np.matmul(self.ginv, np.matmul(self.ah, xb[:, :, None]))  # (P, K, 1)
+        corr = np.matmul(self.ah_h, fwd)[:, :, 0] * self.binv_band
+        model.band.put(x, (xb - corr).T.reshape((self.nz,) + model.band.box_shape))
+        return x, fwd[:, :, 0]
 
-    def _grad(self, phi):
+    def _data(self, fwd, band) -> float:
+        """‖Âφ̂ − ĉ‖² over the whole spectrum, from the half band."""
+        return float(np.sum(self.model.multiplicity[:, None] * np.abs(fwd - band) ** 2))
+
+    def _grad(self, phi, out=None):
         """Forward differences per µm (periodic): (3, Z, ny, nx)."""
-        return np.stack([(np.roll(phi, -1, axis=a) - phi) / self.voxel[a] for a in range(3)])
+        out = np.empty((3,) + phi.shape, np.float32) if out is None else out
+        for a, h in enumerate(self.voxel):
+            p, g = np.moveaxis(phi, a, 0), np.moveaxis(out[a], a, 0)
+            np.subtract(p[1:], p[:-1], out=g[:-1])
+            np.subtract(p[:1], p[-1:], out=g[-1:])
+            g *= np.float32(1 / h)
+        return out
 
     def _grad_adj(self, g):
-        """Dᴴ of :meth:`_grad`."""
-        return sum((np.roll(g[a], 1, axis=a) - g[a]) / self.voxel[a] for a in range(3))
+        """Dᴴ of :meth:`_grad`: Σ_a (g_a[i−1] − g_a[i]) / h_a."""
+        out = np.zeros(g.shape[1:], np.float32)
+        tmp = np.empty_like(out)
+        for a, h in enumerate(self.voxel):
+            ga, t = np.moveaxis(g[a], a, 0), np.moveaxis(tmp, a, 0)
+            np.subtract(ga[:-1], ga[1:], out=t[1:])
+            np.subtract(ga[-1:], ga[:1], out=t[:1])
+            t *= np.float32(1 / h)
+            out += tmp
+        return out
 
     # ------------------------------------------------------------------ solve
     def phase(
@@ -286,70 +305,56 @@ class TvInversion:
         if sign not in SIGNS:
             raise SsdpcError(f"sign '{sign}': use one of {', '.join(SIGNS)}")
         if sign == "auto":
-            # the sign the data support: a short solve with each, the lower objective wins
-            kw = dict(warm=warm, phi_max=phi_max, lam=lam, iterations=PROBE, tol=0.0, quiet=True)
-            probes = {s: self.phase(contrast, sign=s, **kw) for s in ("denser", "lighter")}
-            best = min(probes, key=lambda s: probes[s][1].objective[-1])
-            other = "lighter" if best == "denser" else "denser"
-            phi, report = self.phase(
-                contrast,
-                warm=probes[best][0],
-                sign=best,
-                phi_max=phi_max,
-                lam=lam,
-                iterations=max(iterations - PROBE, 1),
-                tol=tol,
-                progress=progress,
-                should_stop=should_stop,
-            )
-            report.sign_objectives = {s: probes[s][1].objective[-1] for s in probes}
-            report.objective = probes[best][1].objective + report.objective
-            report.relative_change = probes[best][1].relative_change + report.relative_change
-            report.iterations += PROBE  # the chosen sign's path; the other probe ran PROBE more
-            report.sign = f"auto: {best} (objective {report.sign_objectives[best]:.4g} vs {other} "
-            report.sign += f"{report.sign_objectives[other]:.4g})"
-            return phi, report
-        spec = self.spectra(contrast)
-        sigma = self.noise(spec)
-        band = spec[:, self._iy, self._ix]
-        rhs0 = np.zeros((self.nz,) + self.shape, np.complex64)
-        rhs0[:, self._iy, self._ix] = np.einsum("kzyx,kyx->zyx", np.conj(self.ah), band, optimize=True)
+            return self._auto_sign(contrast, warm, phi_max, lam, iterations, tol, progress, should_stop)
+        spec = self._spectra(contrast)
+        sigma = self._noise(spec)
+        band = self.model.take(spec)  # (P, K)
+        rhs0 = self.model.put(np.matmul(self.ah_h, band[:, :, None])[:, :, 0], self.nz)
         scale = sigma * math.sqrt(self.data_scale) if math.isfinite(sigma) and sigma > 0 else 1e-3
         report = TvReport(noise=sigma, lam_auto=lam is None, sign=sign)
         lam_abs = LAMBDA_PER_NOISE * scale * (1.0 if lam is None else float(lam))
         report.lam = lam_abs
+        cell = float(np.prod(self.voxel))
         # the variables live on the padded grid
-        p = self.pad
-        zsl = slice(p, p + len(self.z_um))
         phi = np.zeros((self.nz,) + self.shape, np.float32)
         if warm is not None:
-            phi[zsl] = warm
+            phi[self.planes] = warm
         z1 = self._grad(phi)
         u1 = np.zeros_like(z1)
         z2 = self._project(phi, sign, phi_max)
         u2 = np.zeros_like(phi)
-        thresh = lam_abs / self.rho * float(np.prod(self.voxel))
-        l1 = thresh / self.sparsity_um  # μ = λ / ℓ: the medium is Δn = 0 where the data need nothing
+        g = np.empty_like(z1)
+        thresh = np.float32(lam_abs / self.rho * cell)
+        l1 = thresh / np.float32(self.sparsity_um)  # μ = λ / ℓ: the medium is Δn = 0 where the data need nothing
         for it in range(iterations):
             if should_stop is not None and should_stop():
                 break
-            r = self._grad_adj(z1 - u1) + (z2 - u2)
-            rhs = rhs0 + sfft.fftn(r, norm="ortho", workers=-1) * self.rho
-            phi_hat = self._solve(rhs)
-            new = sfft.ifftn(phi_hat, norm="ortho", workers=-1).real.astype(np.float32)
+            np.subtract(z1, u1, out=g)
+            r = self._grad_adj(g)
+            r += z2
+            r -= u2
+            rhs = self._fft(r)
+            rhs *= self.rho
+            rhs += rhs0
+            phi_hat, fwd = self._solve(rhs)
+            new = self._ifft(phi_hat)
             change = float(np.linalg.norm(new - phi)) / max(float(np.linalg.norm(new)), 1e-12)
             phi = new
-            g = self._grad(phi)
-            data = float(np.sum(np.abs(self.forward_band(phi_hat) - band) ** 2))
-            penalty = lam_abs * (float(np.sum(np.abs(g))) + float(np.sum(np.abs(phi))) / self.sparsity_um)
-            report.objective.append(0.5 * data + penalty * float(np.prod(self.voxel)))
-            # over-relaxed ADMM (Boyd et al. 2011, §3.4.3): converges in fewer iterations
-            v = RELAX * g + (1 - RELAX) * z1 + u1
-            z1 = _shrink(v, thresh)
-            u1 = v - z1
+            self._grad(phi, out=g)
+            penalty = lam_abs * (float(np.abs(g).sum()) + float(np.abs(phi).sum()) / self.sparsity_um)
+            report.objective.append(0.5 * self._data(fwd, band) + penalty * cell)
+            # over-relaxed ADMM (Boyd et al. 2011, §3.4.3): converges in fewer iterations.
+            # z₁ = shrink(v) and u₁ = v − z₁ = clip(v, ±t), with v = αDφ + (1 − α)z₁ + u₁
+            g *= np.float32(RELAX)
+            z1 *= np.float32(1 - RELAX)
+            g += z1
+            g += u1
+            np.clip(g, -thresh, thresh, out=u1)
+            np.subtract(g, u1, out=z1)
             w = RELAX * phi + (1 - RELAX) * z2
             z2 = self._project(_shrink(w + u2, l1), sign, phi_max)
-            u2 = u2 + w - z2
+            u2 += w
+            u2 -= z2
             report.relative_change.append(change)
             report.iterations = it + 1
             if progress is not None:
@@ -358,8 +363,8 @@ class TvInversion:
                 report.converged = True
                 break
         out = self._project(phi, sign, phi_max)  # the feasible point nearest the last iterate
-        res = self._residual(out, band)
-        expected = self._noise_power(sigma, band.shape)
+        res = self._data(np.matmul(self.ah, self.model.take(self._fft(out))[:, :, None])[:, :, 0], band)
+        expected = float(sigma**2 * self.mask.mean() * self.model.multiplicity.sum())
         report.residual_over_noise = res / expected if expected > 0 else float("nan")
         last = report.relative_change[-1] if report.relative_change else float("inf")
         # the limit ends most solves a little short of ``tol`` (0.5% change per iteration after 60):
@@ -372,21 +377,39 @@ class TvInversion:
                 SsdpcWarning,
                 stacklevel=2,
             )
-        return out[zsl], report
+        return out[self.planes], report
+
+    def _auto_sign(self, contrast, warm, phi_max, lam, iterations, tol, progress, should_stop):
+        """The sign the data support: a short solve with each, the lower objective wins."""
+        kw = dict(warm=warm, phi_max=phi_max, lam=lam, iterations=PROBE, tol=0.0, quiet=True)
+        probes = {s: self.phase(contrast, sign=s, **kw) for s in ("denser", "lighter")}
+        best = min(probes, key=lambda s: probes[s][1].objective[-1])
+        other = "lighter" if best == "denser" else "denser"
+        phi, report = self.phase(
+            contrast,
+            warm=probes[best][0],
+            sign=best,
+            phi_max=phi_max,
+            lam=lam,
+            iterations=max(iterations - PROBE, 1),
+            tol=tol,
+            progress=progress,
+            should_stop=should_stop,
+        )
+        report.sign_objectives = {s: probes[s][1].objective[-1] for s in probes}
+        report.objective = probes[best][1].objective + report.objective
+        report.relative_change = probes[best][1].relative_change + report.relative_change
+        report.iterations += PROBE  # the chosen sign's path; the other probe ran PROBE more
+        report.sign = f"auto: {best} (objective {report.sign_objectives[best]:.4g} vs {other} "
+        report.sign += f"{report.sign_objectives[other]:.4g})"
+        return phi, report
 
     def _project(self, phi, sign, phi_max):
         lo = 0.0 if sign == "denser" else -phi_max
         hi = 0.0 if sign == "lighter" else phi_max
         return np.clip(phi, lo, hi) * self.mask
 
-    def _residual(self, phi, band) -> float:
-        phi_hat = sfft.fftn(phi, norm="ortho", workers=-1)
-        return float(np.sum(np.abs(self.forward_band(phi_hat) - band) ** 2))
-
-    def _noise_power(self, sigma, band_shape) -> float:
-        return float(sigma**2 * self.mask.mean() * np.prod(band_shape))
-
 
 def _shrink(v, t):
     """Soft threshold: the proximal step of t‖·‖₁."""
-    return np.sign(v) * np.maximum(np.abs(v) - t, 0)
+    return v - np.clip(v, -t, t)

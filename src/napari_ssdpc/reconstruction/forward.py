@@ -1,0 +1,137 @@
+"""The views' first-order model, one small matrix per spatial frequency (paper Eqs. 2-4).
+
+Each flat-fielded view k holds the contrast c_k = I_k / I0_k − 1 of every slab of the sample,
+each through its own defocused phase WOTF (docs/conventions.md):
+
+    ĉ_k(u) = Σ_z H_k(u; z) / I0_k · φ̂_z(u)
+
+The WOTFs vanish beyond |u| = 2ρ (the autocorrelation of a sub-aperture of radius ρ), and views
+and phase are real, so only the half spectrum of a real FFT inside that disk carries anything:
+the box :class:`~napari_ssdpc.reconstruction.deconvolution.Band` keeps. Per frequency p of that
+box the model is a K x Z matrix A_p; the operator stores all of them as one (P, K, Z) complex64
+array, so every sum over planes or views is one batched matrix product (``np.matmul``) over
+contiguous memory. Both phase methods (:mod:`.wotf` and :mod:`.regularised`) use one instance,
+built once per optics, lenslets, view grid and z grid.
+
+The views are weighted by w_k = √(I0_k / max I0): the normalised contrast of a dim view is
+noisier (shot noise), so the weighted contrast has the same noise in every view.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.fft as sfft
+
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.physics import transfer
+from napari_ssdpc.reconstruction.deconvolution import Band
+from napari_ssdpc.settings.optics import Optics
+
+__all__ = ["ViewModel"]
+
+
+class ViewModel:
+    """A_p = w_k H_k(u_p; z) / I0_k on the half band, (P, K, Z) complex64.
+
+    Parameters
+    ----------
+    optics : Optics
+    lenslets : list of Lenslet
+        The lit lenslets, in the order of the views.
+    shape : tuple of int
+        (ny, nx) of a view, px.
+    pixel_um : float
+        Object-side pixel of the views, µm.
+    z_um : array_like, shape (Z,)
+        Slab centres, µm.
+    i0 : array_like, shape (K,), optional
+        Each view's measured direct light (flat frame); the model's by default. Sets the weights.
+    progress : callable, optional
+        ``progress(done, total, 'operators')`` while the planes are built.
+    chunk : int
+        Planes built at a time (memory).
+
+    Attributes
+    ----------
+    a : ndarray, complex64, shape (P, K, Z)
+        The model per band frequency.
+    w : ndarray, float32, shape (K,)
+        The views' weights.
+    band : Band
+        Where the P frequencies lie in an rfft2 spectrum of ``shape`` (rows by columns, row-major).
+    multiplicity : ndarray, float32, shape (P,)
+        How often each frequency appears in the full spectrum (1 for column 0, else 2): sums over
+        the half band times this are sums over the whole spectrum (Parseval).
+    """
+
+    def __init__(self, optics: Optics, lenslets, shape, pixel_um, z_um, *, i0=None, progress=None, chunk: int = 16):
+        self.shape = tuple(int(n) for n in shape)
+        self.pixel_um = float(pixel_um)
+        self.z_um = np.atleast_1d(np.asarray(z_um, float))
+        setup = transfer._LensletSetup(optics, lenslets, self.shape, float(pixel_um))
+        i0_model = setup.i0
+        if np.any(i0_model <= 0):
+            raise SsdpcError("a view without direct light cannot be inverted; leave dark-field lenslets out")
+        i0 = np.asarray(i0_model if i0 is None else i0, float)
+        self.w = np.sqrt(i0 / i0.max()).astype(np.float32)
+        self.band = Band.box(self.shape, setup.m_out)
+        by, bx = self.band.box_shape
+        k, nz = len(i0), len(self.z_um)
+        weight = (self.w / i0_model).astype(np.float32)[None, :, None, None]
+        self.a = np.empty((by * bx, k, nz), np.complex64)
+        for start in range(0, nz, chunk):
+            _, hp = setup.band(self.z_um[start : start + chunk])  # (z, K, my, mx), unshifted order
+            if self.band.is_full:
+                hp = setup.embed(hp)
+            hp = (hp[..., :bx] * weight).astype(np.complex64)  # columns 0..bx−1: the half band
+            self.a[:, :, start : start + len(hp)] = hp.reshape(len(hp), k, by * bx).transpose(2, 1, 0)
+            if progress is not None:
+                progress(min(start + chunk, nz), nz, "operators")
+        mult = np.full(self.band.box_shape, 2.0, np.float32)
+        mult[:, 0] = 1.0
+        if self.shape[1] % 2 == 0 and bx == self.shape[1] // 2 + 1:
+            mult[:, -1] = 1.0  # the Nyquist column of an even width
+        self.multiplicity = mult.ravel()
+
+    @property
+    def n_views(self) -> int:
+        return self.a.shape[1]
+
+    def planes(self, sl: slice) -> ViewModel:
+        """The same model on a contiguous subset of its planes (shares nothing mutable)."""
+        out = object.__new__(ViewModel)
+        out.__dict__.update(self.__dict__)
+        out.z_um = self.z_um[sl]
+        out.a = np.ascontiguousarray(self.a[:, :, sl])
+        return out
+
+    def spectra(self, contrast) -> np.ndarray:
+        """Weighted contrast spectra on the band, (P, K) complex64 (unitary FFT).
+
+        Parameters
+        ----------
+        contrast : ndarray, shape (K, ny, nx)
+            I_k / I0_k − 1 of each view.
+        """
+        c = np.asarray(contrast, np.float32) * self.w[:, None, None]
+        return self.take(sfft.rfft2(c, norm="ortho", workers=-1))
+
+    def take(self, spec) -> np.ndarray:
+        """(n, ny, nx//2+1) spectra -> their band, (P, n)."""
+        band = self.band.take(spec)
+        return band.reshape(band.shape[0], -1).T
+
+    def put(self, values, lead: int, dtype=np.complex64) -> np.ndarray:
+        """(P, n) band values -> (n, ny, nx//2+1) spectra, zero beyond the band."""
+        out = np.zeros((lead, self.shape[0], self.shape[1] // 2 + 1), dtype)
+        self.band.put(out, values.T.reshape((lead,) + self.band.box_shape))
+        return out
+
+    def images(self, values) -> np.ndarray:
+        """(P, n) band values -> (n, ny, nx) real images (unitary inverse FFT), float32."""
+        spec = self.put(values, values.shape[1])
+        return sfft.irfft2(spec, s=self.shape, norm="ortho", workers=-1).astype(np.float32)
+
+    def forward(self, phi_band) -> np.ndarray:
+        """A φ̂ per band frequency: (P, Z) -> (P, K)."""
+        return np.matmul(self.a, phi_band[:, :, None])[:, :, 0]
