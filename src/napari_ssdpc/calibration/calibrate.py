@@ -54,6 +54,9 @@ KINDS = ("auto", "white", "flat", "sample")
 PRIOR_TOLERANCE = 0.05  # measured pitch and EI radius may differ from the optics' by 5 %
 DEVIATION_WARN = 0.02  # warn when a lenslet sits more than 2 % of the pitch off the lattice
 OUTLIER = 0.08  # a rim fit more than 8 % of the pitch off the lattice is not trusted
+#: With few EIs, a centre the others predict worse than this fraction of the pitch (and 4 x worse
+#: than the rest) is dropped: one pulled rim would otherwise move the whole lattice.
+LOO_OUTLIER = 0.005
 MAX_LATTICE_RMS = 0.05  # rms of the EI centres about the lattice, as a fraction of the pitch
 MAX_AXIS_RMS = 0.05  # rms of the brightness-pattern fit, relative to full brightness
 DIM_EDGE = 0.25  # EIs with a rim less steep than this x the median take their lattice position
@@ -197,7 +200,33 @@ def _lattice(xy, n, sig, pitch, flip, usable, cell):
         trusted = new
         lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted], cell)
         res = xy - lat.centres(n)
+    if MIN_EIS < trusted.sum() < MIN_AFFINE:
+        trusted = _leave_one_out(xy, n, w, flip, cell, trusted, pitch)
+        lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted], cell)
+        res = xy - lat.centres(n)
     return lat, res, trusted
+
+
+def _leave_one_out(xy, n, w, flip, cell, trusted, pitch):
+    """Few EIs fix a similarity lattice with little redundancy, so a median test cannot see one
+    pulled rim. Fit without each centre in turn; where leaving one out makes the others agree
+    (their scatter, per degree of freedom) and the others predict it worse than ``LOO_OUTLIER``
+    of the pitch and 4 x that scatter, drop it, and look again."""
+    idx = np.flatnonzero(trusted)
+    while len(idx) > MIN_EIS:
+        err, scatter = np.empty(len(idx)), np.empty(len(idx))
+        for j, i in enumerate(idx):
+            rest = np.delete(idx, j)
+            lat, res = fit_affine(xy[rest], n[rest], flip, w[rest], cell)
+            err[j] = float(np.hypot(*(xy[i] - lat.centres(n[i : i + 1])[0])))
+            scatter[j] = float(np.sqrt(np.sum(res**2) / max(2 * len(rest) - 4, 1)))
+        best = int(np.argmin(scatter))
+        if err[best] < max(LOO_OUTLIER * pitch, 4 * scatter[best]):
+            break
+        idx = np.delete(idx, best)
+    out = np.zeros(len(xy), bool)
+    out[idx] = True
+    return out
 
 
 # ------------------------------------------------------------------ calibrate
