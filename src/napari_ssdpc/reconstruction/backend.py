@@ -13,7 +13,10 @@ so the Richardson–Lucy iterations never leave the GPU.
 
 from __future__ import annotations
 
+import functools
 import importlib
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -133,3 +136,19 @@ def gpu_available() -> bool:
     except SsdpcError:
         return False
     return True
+
+
+@functools.cache
+def _pool(parts: int) -> ThreadPoolExecutor:
+    return ThreadPoolExecutor(parts)
+
+
+def in_threads(fn, n: int) -> list:
+    """``fn(slice)`` over ``range(n)`` cut into one part per core, in threads of one shared pool:
+    NumPy's elementwise operations release the GIL, so the parts run side by side."""
+    parts = max(1, min(os.cpu_count() or 1, n))
+    bounds = np.linspace(0, n, parts + 1).astype(int)
+    slices = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])]
+    if parts == 1:
+        return [fn(slices[0])]
+    return list(_pool(parts).map(fn, slices))

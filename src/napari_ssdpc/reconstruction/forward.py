@@ -19,6 +19,8 @@ noisier (shot noise), so the weighted contrast has the same noise in every view.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import scipy.fft as sfft
 
@@ -27,7 +29,7 @@ from napari_ssdpc.physics import transfer
 from napari_ssdpc.reconstruction.deconvolution import Band
 from napari_ssdpc.settings.optics import Optics
 
-__all__ = ["ViewModel"]
+__all__ = ["ViewModel", "apply"]
 
 
 class ViewModel:
@@ -99,14 +101,13 @@ class ViewModel:
 
     def planes(self, sl: slice) -> ViewModel:
         """The same model on a contiguous subset of its planes (shares nothing mutable)."""
-        out = object.__new__(ViewModel)
-        out.__dict__.update(self.__dict__)
+        out = copy.copy(self)
         out.z_um = self.z_um[sl]
         out.a = np.ascontiguousarray(self.a[:, :, sl])
         return out
 
-    def spectra(self, contrast) -> np.ndarray:
-        """Weighted contrast spectra on the band, (P, K) complex64 (unitary FFT).
+    def full_spectra(self, contrast) -> np.ndarray:
+        """Weighted contrast spectra, (K, ny, nx//2+1) complex64 (unitary real FFT).
 
         Parameters
         ----------
@@ -114,7 +115,11 @@ class ViewModel:
             I_k / I0_k − 1 of each view.
         """
         c = np.asarray(contrast, np.float32) * self.w[:, None, None]
-        return self.take(sfft.rfft2(c, norm="ortho", workers=-1))
+        return sfft.rfft2(c, norm="ortho", workers=-1)
+
+    def spectra(self, contrast) -> np.ndarray:
+        """:meth:`full_spectra` on the band, (P, K)."""
+        return self.take(self.full_spectra(contrast))
 
     def take(self, spec) -> np.ndarray:
         """(n, ny, nx//2+1) spectra -> their band, (P, n)."""
@@ -134,4 +139,9 @@ class ViewModel:
 
     def forward(self, phi_band) -> np.ndarray:
         """A φ̂ per band frequency: (P, Z) -> (P, K)."""
-        return np.matmul(self.a, phi_band[:, :, None])[:, :, 0]
+        return apply(self.a, phi_band)
+
+
+def apply(m, x) -> np.ndarray:
+    """One matrix per band frequency times one vector each: (P, M, N) @ (P, N) -> (P, M)."""
+    return np.matmul(m, x[:, :, None])[:, :, 0]

@@ -32,16 +32,15 @@ is that noise in the units of the data operator times ``LAMBDA_PER_NOISE`` (docs
 from __future__ import annotations
 
 import math
-import os
 import warnings
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
-from napari_ssdpc.reconstruction.forward import ViewModel
+from napari_ssdpc.reconstruction.backend import in_threads
+from napari_ssdpc.reconstruction.forward import ViewModel, apply
 
 __all__ = ["LAMBDA_PER_NOISE", "SIGNS", "TvInversion", "TvReport", "padded_planes"]
 
@@ -200,11 +199,7 @@ class TvInversion:
         Nothing the instrument images lies beyond |u| = 2ρ; the median of |ĉ|² out there is
         robust against the few frequencies the field-stop edge leaks.
         """
-        return self._noise(self._spectra(contrast))
-
-    def _spectra(self, contrast):
-        c = np.asarray(contrast, np.float32) * self.model.w[:, None, None]
-        return sfft.rfft2(c, norm="ortho", workers=-1)  # (K, ny, nx//2+1)
+        return self._noise(self.model.full_spectra(contrast))
 
     def _noise(self, spec) -> float:
         if self._outside.sum() < 8:
@@ -227,10 +222,10 @@ class TvInversion:
         x = rhs_hat / self.b
         model = self.model
         xb = model.take(x)  # (P, kz)
-        fwd = np.matmul(self.ginv, np.matmul(self.ah, xb[:, :, None]))  # (P, K, 1)
-        corr = np.matmul(self.ah_h, fwd)[:, :, 0] * self.binv_band
+        fwd = apply(self.ginv, apply(self.ah, xb))  # (P, K)
+        corr = apply(self.ah_h, fwd) * self.binv_band
         model.band.put(x, (xb - corr).T.reshape((self.nz,) + model.band.box_shape))
-        return x, fwd[:, :, 0]
+        return x, fwd
 
     def _data(self, fwd, band) -> float:
         """‖Âφ̂ − ĉ‖² over the whole spectrum, from the half band."""
@@ -308,10 +303,10 @@ class TvInversion:
             raise SsdpcError(f"sign '{sign}': use one of {', '.join(SIGNS)}")
         if sign == "auto":
             return self._auto_sign(contrast, warm, phi_max, lam, iterations, tol, progress, should_stop)
-        spec = self._spectra(contrast)
+        spec = self.model.full_spectra(contrast)
         sigma = self._noise(spec)
         band = self.model.take(spec)  # (P, K)
-        rhs0 = self.model.put(np.matmul(self.ah_h, band[:, :, None])[:, :, 0], self.nz)
+        rhs0 = self.model.put(apply(self.ah_h, band), self.nz)
         scale = sigma * math.sqrt(self.data_scale) if math.isfinite(sigma) and sigma > 0 else 1e-3
         report = TvReport(noise=sigma, lam_auto=lam is None, sign=sign)
         lam_abs = LAMBDA_PER_NOISE * scale * (1.0 if lam is None else float(lam))
@@ -343,7 +338,7 @@ class TvInversion:
             change = float(np.linalg.norm(new - phi)) / max(float(np.linalg.norm(new)), 1e-12)
             phi = new
             self._grad(phi, out=g)
-            tv = sum(_in_threads(lambda sl: _update_gradients(g[:, sl], z1[:, sl], u1[:, sl], thresh), self.nz))
+            tv = sum(in_threads(lambda sl: _update_gradients(g[:, sl], z1[:, sl], u1[:, sl], thresh), self.nz))
             penalty = lam_abs * (tv + float(np.abs(phi).sum()) / self.sparsity_um)
             report.objective.append(0.5 * self._data(fwd, band) + penalty * cell)
             w = RELAX * phi + (1 - RELAX) * z2
@@ -358,7 +353,7 @@ class TvInversion:
                 report.converged = True
                 break
         out = self._project(phi, sign, phi_max)  # the feasible point nearest the last iterate
-        res = self._data(np.matmul(self.ah, self.model.take(self._fft(out))[:, :, None])[:, :, 0], band)
+        res = self._data(apply(self.ah, self.model.take(self._fft(out))), band)
         expected = float(sigma**2 * self.mask.mean() * self.model.multiplicity.sum())
         report.residual_over_noise = res / expected if expected > 0 else float("nan")
         last = report.relative_change[-1] if report.relative_change else float("inf")
@@ -419,18 +414,6 @@ def _update_gradients(g, z1, u1, thresh) -> float:
     np.clip(g, -thresh, thresh, out=u1)
     np.subtract(g, u1, out=z1)
     return tv
-
-
-def _in_threads(fn, n: int) -> list:
-    """``fn(slice)`` over ``range(n)`` cut into one part per core, in threads: NumPy's
-    elementwise operations release the GIL, so the parts run side by side."""
-    parts = max(1, min(os.cpu_count() or 1, n))
-    bounds = np.linspace(0, n, parts + 1).astype(int)
-    slices = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])]
-    if parts == 1:
-        return [fn(slices[0])]
-    with ThreadPoolExecutor(parts) as pool:
-        return list(pool.map(fn, slices))
 
 
 def _shrink(v, t):

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.reconstruction.forward import ViewModel
+from napari_ssdpc.reconstruction.forward import ViewModel, apply
 
 
 class WotfInversion:
@@ -49,4 +49,4 @@ class WotfInversion:
     def phase(self, contrast) -> np.ndarray:
         """Phase per slab, (Z, ny, nx) float32 rad, from the views' contrast (K, ny, nx)."""
         spec = self.model.spectra(contrast)  # (P, K)
-        return self.model.images(np.matmul(self.inverse, spec[:, :, None])[:, :, 0])
+        return self.model.images(apply(self.inverse, spec))
