@@ -14,6 +14,7 @@ pytest.importorskip("napari")
 pytest.importorskip("pytestqt")
 
 import gui_steps as _steps
+from napari_ssdpc._napari import notify as _notify
 from napari_ssdpc._napari import sample_data as _sample_data
 from napari_ssdpc._napari import widgets as _widgets
 
@@ -25,7 +26,7 @@ def test_widgets_opened_from_the_plugins_menu_share_one_session_and_reach_an_ri_
     make_napari_viewer, qtbot, monkeypatch
 ):
     shown = []
-    monkeypatch.setattr(_widgets, "show_error", lambda msg: shown.append(str(msg)))
+    monkeypatch.setattr(_notify, "error", lambda msg: shown.append(str(msg)))
     viewer = make_napari_viewer()
     w = {}
     for name in MENU:

@@ -12,11 +12,13 @@ import numpy as np
 import pytest
 
 from napari_ssdpc.physics.design import design
+from napari_ssdpc.settings.optics import Optics
 
 pytest.importorskip("napari")
 pytest.importorskip("pytestqt")
 
 import gui_steps as _steps
+from napari_ssdpc._napari import notify as _notify
 from napari_ssdpc._napari import sample_data as _sample_data
 from napari_ssdpc._napari import widgets as _widgets
 from napari_ssdpc.calibration.calibrate import calibrate
@@ -34,7 +36,7 @@ def bead():
 def errors(monkeypatch):
     """Messages shown with napari's show_error by the widgets."""
     shown = []
-    monkeypatch.setattr(_widgets, "show_error", lambda msg: shown.append(str(msg)))
+    monkeypatch.setattr(_notify, "error", lambda msg: shown.append(str(msg)))
     return shown
 
 
@@ -176,7 +178,7 @@ def test_cancel_stops_a_running_reconstruction(make_napari_viewer, qtbot, bead, 
 def test_core_errors_are_notifications(make_napari_viewer, qtbot, bead, errors, monkeypatch):
     frame, flat, white, optics = bead
     warned = []
-    monkeypatch.setattr(_widgets, "show_warning", lambda msg: warned.append(str(msg)))
+    monkeypatch.setattr(_notify, "warning", lambda msg: warned.append(str(msg)))
     viewer = make_napari_viewer()
     w = _setup_bead(viewer, qtbot, optics)
     assert warned == []
@@ -211,7 +213,7 @@ def test_optics_widget_design_numbers_are_live(make_napari_viewer, tmp_path):
     assert d["fov_um"] == pytest.approx(2 * 122.55, rel=1e-3) and f"FOV {d['fov_um']:.1f} µm" in ow.design.value
     p = tmp_path / "optics.yaml"
     ow.save(p)
-    ow.set_optics(_widgets.Optics.paper())
+    ow.set_optics(Optics.paper())
     ow.path.value = p
     ow.load()
     assert ow.fields["fourier_lens_mm"].value == 150.0

@@ -20,6 +20,7 @@ from magicgui.widgets import ComboBox, Container, FileEdit, Label, PushButton
 from qtpy.QtWidgets import QVBoxLayout, QWidget
 from scipy import ndimage
 
+from napari_ssdpc._napari import notify
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.frames import atomic_write
 
@@ -242,13 +243,11 @@ class ProfileWidget(QWidget):
         """Write all profiles: line, orientation, sample, distance_um, world coordinates (µm; t in
         frames), value. Returns the path, or None (with a notification) when there is nothing to
         write or no file name."""
-        from napari.utils.notifications import show_error
-
         if not self.profiles:
-            show_error("no profile to export: draw a line in the lines layer first")
+            notify.error("no profile to export: draw a line in the lines layer first")
             return None
         if not path or Path(path).is_dir():
-            show_error("choose a CSV file name first")
+            notify.error("choose a CSV file name first")
             return None
         labels = self.profiles[0]["labels"]
         try:
@@ -262,6 +261,6 @@ class ProfileWidget(QWidget):
                             [p["line"], p["orientation"], j, f"{d:.6g}", *(f"{c:.6g}" for c in xyz), repr(float(v))]
                         )
         except SsdpcError as e:
-            show_error(str(e))
+            notify.error(str(e))
             return None
         return path

@@ -1,0 +1,102 @@
+"""The Calibrate widget: find the lenslet lattice and the optical axis on a frame layer."""
+
+from __future__ import annotations
+
+import numpy as np
+from magicgui.widgets import ComboBox, Container, FileEdit, Label, PushButton
+
+from napari_ssdpc._napari import notify
+from napari_ssdpc._napari.reader import calibration_layers
+from napari_ssdpc._napari.widgets.common import follow_layers, frame_index, image_layer_choices, run_buttons, show_layer
+from napari_ssdpc._napari.widgets.jobs import JobRunner
+from napari_ssdpc._napari.widgets.session import session_for
+from napari_ssdpc.errors import SsdpcError
+
+__all__ = ["CalibrateWidget"]
+
+
+class CalibrateWidget(Container):
+    """Detect the lenslet grid on an image layer; adds EI circles and centres layers."""
+
+    def __init__(self, napari_viewer):
+        super().__init__(labels=True)
+        self.viewer = napari_viewer
+        self.session = session_for(napari_viewer)
+        self.image = ComboBox(
+            label="frame",
+            choices=image_layer_choices(napari_viewer, prefer="white"),
+            tooltip="raw frame to calibrate on: best a white frame (condenser fully open); a "
+            "flat or sample frame also works, less precisely (±0.5 px)",
+        )
+        self.kind = ComboBox(
+            label="frame kind",
+            choices=["auto", "white", "flat", "sample"],
+            value="auto",
+            tooltip="white: condenser fully open (σ = 1); flat/sample: the sample's condenser "
+            "setting; auto: decided from the number of lit lenslets",
+        )
+        self.run_button, self.cancel_button, self.status = run_buttons(
+            "Calibrate", "find the lattice and the optical axis"
+        )
+        self.result = Label(value="")
+        self.result.tooltip = "optical axis position (px), lenslet pitch (px), MLA rotation (degrees)"
+        self.path = FileEdit(mode="w", filter="*.json")
+        self.path.label = "save as"
+        self.path.tooltip = "calibration JSON to write (open it again with File > Open)"
+        self.save_button = PushButton(text="Save calibration JSON", tooltip="write the last calibration to the path")
+        self.extend(
+            [
+                self.image,
+                self.kind,
+                self.run_button,
+                self.cancel_button,
+                self.status,
+                self.result,
+                self.path,
+                self.save_button,
+            ]
+        )
+        self.runner = JobRunner("Calibrate", self.run_button, self.cancel_button, self.status)
+        self.calibration = None
+        self.run_button.changed.connect(self.run)
+        self.save_button.changed.connect(lambda *_: self.save(self.path.value))
+        follow_layers(napari_viewer, self)
+
+    def run(self, *_):
+        layer = self.image.value
+        if layer is None:
+            notify.error("no image layer to calibrate: open a white frame (or the sample data) first")
+            return None
+        data, t, kind, optics = layer.data, frame_index(self.viewer, layer), self.kind.value, self.session.optics
+
+        def work(progress, should_stop):
+            from napari_ssdpc.calibration.calibrate import calibrate
+
+            progress(0, 1, "calibrating")
+            frame = np.asarray(data if t is None else data[t])
+            cal = calibrate(frame, optics, kind=kind)
+            progress(1, 1, "calibrated")
+            return cal
+
+        return self.runner.start(work, lambda cal: self._done(cal, layer.name), "Calibrate")
+
+    def _done(self, cal, source: str):
+        self.calibration = cal
+        for data, kwargs, kind in calibration_layers(cal, source):
+            show_layer(self.viewer, data, kwargs, kind)
+        g = cal.grid
+        self.result.value = (
+            f"axis (x, y) = ({g.axis_px[0]:.2f}, {g.axis_px[1]:.2f}) px\n"
+            f"pitch {g.pitch_px:.3f} px · rotation {g.rotation_deg:+.3f}°\n"
+            f"{len(cal.lenslets)} lenslets · lattice rms {cal.residual_px:.3f} px · {cal.kind} frame"
+        )
+        return f"calibrated on '{source}'"
+
+    def save(self, path):
+        if self.calibration is None:
+            notify.error("nothing to save: run Calibrate first")
+            return
+        try:
+            self.calibration.to_json(path)
+        except SsdpcError as e:
+            notify.error(e)

@@ -1,0 +1,118 @@
+"""Helpers the dock widgets share: layer choices, layer updates, warnings and buttons."""
+
+from __future__ import annotations
+
+import warnings
+import weakref
+
+import numpy as np
+from magicgui.widgets import Container, Label, PushButton
+
+from napari_ssdpc._napari import notify
+from napari_ssdpc.errors import SsdpcWarning
+
+__all__ = [
+    "calibration_layer_choices",
+    "catching_warnings",
+    "follow_layers",
+    "frame_index",
+    "image_layer_choices",
+    "run_buttons",
+    "show_layer",
+]
+
+
+def image_layer_choices(viewer, ndims=(2, 3), allow_none: str | None = None, prefer: str = ""):
+    """Choices callable for a ComboBox of raw image layers: the top of the layer list first, layers
+    whose name contains ``prefer`` before all others (the default choice), then ``allow_none``."""
+    from napari.layers import Image
+
+    def choices(_widget=None):
+        layers = [
+            lyr
+            for lyr in reversed(viewer.layers)
+            if isinstance(lyr, Image) and lyr.ndim in ndims and lyr.metadata.get("ssdpc", {}).get("kind") != "result"
+        ]
+        first = [lyr for lyr in layers if prefer and prefer in lyr.name.lower()]
+        rest = [lyr for lyr in layers if lyr not in first]
+        none = [(allow_none, None)] if allow_none else []
+        return [(lyr.name, lyr) for lyr in first] + none + [(lyr.name, lyr) for lyr in rest]
+
+    return choices
+
+
+def calibration_layer_choices(viewer):
+    def choices(_widget=None):
+        return [
+            (lyr.name, lyr)
+            for lyr in viewer.layers
+            if lyr.metadata.get("ssdpc", {}).get("kind") == "calibration" and lyr._type_string == "shapes"
+        ]
+
+    return choices
+
+
+def follow_layers(viewer, container: Container):
+    """Refresh the container's layer choices when layers come, go, move or are renamed (also when
+    the widget is used outside a dock); a closed widget is left alone."""
+    ref = weakref.ref(container)
+
+    def refresh(*_):
+        w = ref()
+        if w is not None:
+            try:
+                w.reset_choices()
+            except RuntimeError:  # the Qt widget was deleted with its dock
+                pass
+
+    ev = viewer.layers.events
+    for e in (ev.inserted, ev.removed, ev.reordered):
+        e.connect(refresh)
+    ev.inserted.connect(lambda event: event.value.events.name.connect(refresh))
+
+
+def frame_index(viewer, layer) -> int | None:
+    """Time index of ``layer`` (t, y, x) at the viewer's current position; None for a 2D frame."""
+    if layer.ndim < 3:
+        return None
+    pos = layer.world_to_data(viewer.dims.point)
+    return int(np.clip(round(float(pos[0])), 0, layer.data.shape[0] - 1))
+
+
+def show_layer(viewer, data, kwargs: dict, layer_type: str = "image"):
+    """Add a layer, or update the one of the same name in place (same object, same position).
+    A layer whose dimensionality changes (a frame, then a series) is replaced at its position."""
+    name = kwargs["name"]
+    if name in viewer.layers:
+        old = viewer.layers[name]
+        if layer_type == "image" and old._type_string == "image" and old.ndim == np.ndim(data):
+            old.data = data
+            # the display choices (colormap, rendering, ...) stay as the user left them
+            for key in ("scale", "translate", "metadata", "contrast_limits", "axis_labels", "units"):
+                if key in kwargs:
+                    setattr(old, key, kwargs[key])
+            return old
+        index = viewer.layers.index(old)
+        viewer.layers.remove(old)
+        new = getattr(viewer, f"add_{layer_type}")(data, **kwargs)
+        viewer.layers.move(viewer.layers.index(new), index)
+        return new
+    return getattr(viewer, f"add_{layer_type}")(data, **kwargs)
+
+
+def catching_warnings(fn, *args, **kwargs):
+    """Call fn; show each SsdpcWarning it raises as a napari warning notification."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", SsdpcWarning)
+        out = fn(*args, **kwargs)
+    for w in caught:
+        if issubclass(w.category, SsdpcWarning):
+            notify.warning(str(w.message))
+    return out
+
+
+def run_buttons(run_text: str, run_tip: str):
+    run = PushButton(text=run_text, tooltip=run_tip)
+    cancel = PushButton(text="Cancel", tooltip="stop the running job within one iteration")
+    status = Label(value="")
+    return run, cancel, status

@@ -1,0 +1,177 @@
+"""Long work off the GUI thread: one job at a time per widget, with progress and Cancel.
+
+Every long step runs in a generator ``thread_worker``. The core function runs in a helper thread
+and reports ``progress(done, total, label)``; the generator relays each report with ``yield``, so
+napari's progress bar and the widget's status follow it. Cancel sets a stop flag that the core
+checks every iteration (``should_stop``) and that the progress callback checks at every report,
+so a job stops within one iteration. Layers are only touched in the ``yielded``/``returned``
+callbacks, on the main thread. A ``SsdpcError`` becomes a napari error with the core's one-line
+message, a ``SsdpcWarning`` a napari warning (once per job).
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+from dataclasses import dataclass
+
+from magicgui.widgets import Label, PushButton
+from napari.qt.threading import create_worker
+from napari.utils import progress as napari_progress
+
+from napari_ssdpc._napari import notify
+from napari_ssdpc.errors import SsdpcError, SsdpcWarning
+
+__all__ = ["JobRunner", "Outcome"]
+
+
+@dataclass
+class Outcome:
+    value: object = None
+    error: str | None = None
+    cancelled: bool = False
+
+
+def _relay(fn, stop: threading.Event):
+    """Run ``fn(progress, should_stop)`` in a helper thread and yield its progress reports
+    ``(done, total, label)`` as they arrive; return its result or raise its exception."""
+    from napari_ssdpc.reconstruction.pipeline import Cancelled
+
+    reports: queue.Queue = queue.Queue()
+    box = {}
+
+    def progress(done, total, label=""):
+        if stop.is_set():
+            raise Cancelled("cancelled")
+        reports.put((int(done), int(total), str(label)))
+
+    def target():
+        try:
+            box["value"] = fn(progress, stop.is_set)
+        except BaseException as e:  # handed to the generator, re-raised there
+            box["error"] = e
+        finally:
+            reports.put(None)
+
+    thread = threading.Thread(target=target, name="napari-ssdpc job", daemon=True)
+    thread.start()
+    try:
+        while (msg := reports.get()) is not None:
+            yield msg
+    finally:
+        if thread.is_alive():  # closed early: stop the core at its next iteration
+            stop.set()
+        thread.join()
+    if "error" in box:
+        raise box["error"]
+    return box["value"]
+
+
+def _job(fn, stop):
+    """Generator run by the thread_worker: progress reports, then an Outcome."""
+    from napari_ssdpc.reconstruction.pipeline import Cancelled
+
+    try:
+        value = yield from _relay(fn, stop)
+    except Cancelled:
+        return Outcome(cancelled=True)
+    except SsdpcError as e:
+        return Outcome(error=str(e))
+    return Outcome(value=value)
+
+
+class JobRunner:
+    """Run/Cancel buttons, a status line and a napari progress bar around one job at a time."""
+
+    def __init__(self, title: str, run: PushButton, cancel: PushButton, status: Label):
+        self.title, self.run_button, self.cancel_button, self.status = title, run, cancel, status
+        self.worker = None
+        self._stop = None
+        self._pbar = None
+        self._in_update = False
+        cancel.enabled = False
+        cancel.changed.connect(self.cancel)
+
+    @property
+    def running(self) -> bool:
+        return self.worker is not None
+
+    def start(self, fn, on_result, label: str):
+        if self.running:
+            notify.info(f"{self.title} is already running; cancel it first")
+            return None
+        self._stop = threading.Event()
+        self._warned = set()
+        self._pbar = napari_progress(total=0, desc=label)
+        self.status.value = f"{label}…"
+        self.run_button.enabled = False
+        self.cancel_button.enabled = True
+        worker = create_worker(_job, fn, self._stop, _start_thread=False)
+        worker.yielded.connect(self._on_progress)
+        worker.warned.connect(self._on_warning)
+        worker.returned.connect(lambda out: self._on_returned(out, on_result))
+        worker.aborted.connect(self._on_aborted)
+        worker.finished.connect(self._on_finished)
+        self.worker = worker
+        worker.start()
+        return worker
+
+    def cancel(self, *_):
+        if self._stop is not None:
+            self._stop.set()
+            self.status.value = "cancelling…"
+
+    def _on_progress(self, msg):
+        done, total, label = msg
+        pbar = self._pbar
+        if pbar is None:
+            return
+        self.status.value = f"{label} {done}/{total}" if total else label
+        if self._in_update:  # napari's progress bar may process events while it repaints
+            return
+        self._in_update = True
+        try:
+            if pbar.total != total:
+                pbar.total = total
+            pbar.set_description(label)
+            pbar.update(done - pbar.n)
+        finally:
+            self._in_update = False
+
+    def _on_aborted(self):
+        """napari's own cancel (worker.quit): stop the core too."""
+        if self._stop is not None:
+            self._stop.set()
+        self.status.value = "cancelled"
+
+    def _on_warning(self, args):
+        """A warning raised while the job ran (worker.warned gives showwarning's arguments): core
+        warnings become napari warnings, each message once per job."""
+        message, category = args[0], args[1]
+        if issubclass(category, SsdpcWarning) and str(message) not in self._warned:
+            self._warned.add(str(message))
+            notify.warning(str(message))
+
+    def _on_returned(self, out: Outcome, on_result):
+        if out.cancelled:
+            self.status.value = "cancelled"
+            notify.info(f"{self.title}: cancelled")
+        elif out.error is not None:
+            self.status.value = f"error: {out.error}"
+            notify.error(out.error)
+        else:
+            try:
+                msg = on_result(out.value)
+            except SsdpcError as e:
+                self.status.value = f"error: {e}"
+                notify.error(str(e))
+            else:
+                self.status.value = msg or "done"
+
+    def _on_finished(self):
+        if self._pbar is not None:
+            self._pbar.close()
+        self._pbar = None
+        self.worker = None
+        self.run_button.enabled = True
+        self.cancel_button.enabled = False

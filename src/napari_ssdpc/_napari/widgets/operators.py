@@ -1,0 +1,221 @@
+"""The Operators widget: z range, method and its settings; builds the operators once."""
+
+from __future__ import annotations
+
+import weakref
+
+import numpy as np
+from magicgui.widgets import CheckBox, ComboBox, Container, FloatSpinBox, PushButton, SpinBox
+
+from napari_ssdpc._napari import notify
+from napari_ssdpc._napari.reader import result_layer
+from napari_ssdpc._napari.widgets.common import calibration_layer_choices, follow_layers, run_buttons, show_layer
+from napari_ssdpc._napari.widgets.jobs import JobRunner
+from napari_ssdpc._napari.widgets.session import build_reconstructor, calibration_of, session_for
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.settings.base import field_range
+from napari_ssdpc.settings.reconstruction import PHASE_METHODS, SIGNS, TRANSFER_MODELS, ReconstructionSettings
+
+__all__ = ["OperatorsWidget"]
+
+
+class OperatorsWidget(Container):
+    """z range, dz and model; builds the PSFs and transfer functions once (a Reconstructor)."""
+
+    def __init__(self, napari_viewer):
+        super().__init__(labels=True)
+        self.viewer = napari_viewer
+        self.session = session_for(napari_viewer)
+        self.session.operators_widget = weakref.ref(self)
+        rec = ReconstructionSettings().to_dict()
+        self.calibration = ComboBox(
+            label="calibration",
+            choices=calibration_layer_choices(napari_viewer),
+            tooltip="EI-circles layer made by Calibrate or opened from a calibration JSON",
+        )
+        self.z_min = FloatSpinBox(
+            label="z min (µm)",
+            min=-5000,
+            max=5000,
+            step=1,
+            value=rec["z_min_um"],
+            tooltip="first plane, µm from the focal plane (z > 0: farther from the objective)",
+        )
+        self.z_max = FloatSpinBox(
+            label="z max (µm)",
+            min=-5000,
+            max=5000,
+            step=1,
+            value=rec["z_max_um"],
+            tooltip="last plane, µm from the focal plane",
+        )
+        self.dz = FloatSpinBox(
+            label="dz (µm)",
+            min=0.05,
+            max=100,
+            step=0.05,
+            value=rec["dz_um"],
+            tooltip="plane spacing, µm (the paper's axial resolution is about 21 µm)",
+        )
+        self.model = ComboBox(
+            label="transfer model",
+            choices=list(TRANSFER_MODELS),
+            value=rec["model"],
+            tooltip="lenslet: the MLA splits the detection pupil (default); paper: half-disk "
+            "sources as in the paper's Eq. 4",
+        )
+        self.method = ComboBox(
+            label="phase method",
+            choices=list(PHASE_METHODS),
+            value=rec["method"],
+            tooltip="tv: all views inverted with total variation, the sign of Δn and the field stop (default);"
+            " wotf: 3D Tikhonov with each lenslet's defocused transfer function (fast);"
+            " rl: Richardson–Lucy stacks, DPC and Tikhonov per slice (the paper's route)",
+        )
+        fields = ReconstructionSettings.model_fields
+        self.sign = ComboBox(
+            label="sign of Δn (tv)", choices=list(SIGNS), value=rec["sign"], tooltip=fields["sign"].description
+        )
+        lo, hi = field_range(ReconstructionSettings, "tv_lambda")
+        self.tv_lambda = FloatSpinBox(
+            label="TV weight (tv)",
+            min=0.0,
+            max=hi,
+            step=0.1,
+            value=0.0,
+            tooltip=f"{fields['tv_lambda'].description}; 0 = automatic, else {lo:g} to {hi:g}",
+        )
+        lo, hi = field_range(ReconstructionSettings, "tv_iterations")
+        self.tv_iterations = SpinBox(
+            label="TV iterations (tv)",
+            min=int(lo),
+            max=int(hi),
+            value=rec["tv_iterations"],
+            tooltip=fields["tv_iterations"].description,
+        )
+        self.stacks = CheckBox(
+            text="directional stacks (Richardson–Lucy)",
+            value=False,
+            tooltip="also deconvolve the four halves: needed for DPC, stacks, absorption and the PSF view",
+        )
+        self.run_button, self.cancel_button, self.status = run_buttons(
+            "Build operators", "compute the PSFs and transfer functions"
+        )
+        self.lenslet = ComboBox(
+            label="PSF of lenslet",
+            choices=self._lenslet_choices,
+            tooltip="(row, col) of a lit lenslet of the built operators",
+        )
+        self.psf_button = PushButton(
+            text="Show PSF stack", tooltip="add this lenslet's PSF (z, y, x) as a layer (scale in µm)"
+        )
+        self.extend(
+            [
+                self.calibration,
+                self.z_min,
+                self.z_max,
+                self.dz,
+                self.model,
+                self.method,
+                self.sign,
+                self.tv_lambda,
+                self.tv_iterations,
+                self.stacks,
+                self.run_button,
+                self.cancel_button,
+                self.status,
+                self.lenslet,
+                self.psf_button,
+            ]
+        )
+        self.runner = JobRunner("Operators", self.run_button, self.cancel_button, self.status)
+        self.run_button.changed.connect(self.run)
+        self.psf_button.changed.connect(self.show_psf)
+        self.session.optics_loaded.connect(self._defaults)
+        self.session.optics_changed.connect(self._stale)
+        self.session.operators_built.connect(self._refresh_lenslets)
+        follow_layers(napari_viewer, self)
+
+    def _defaults(self, optics):
+        rec = ReconstructionSettings().to_dict()
+        self.z_min.value, self.z_max.value, self.dz.value = rec["z_min_um"], rec["z_max_um"], rec["dz_um"]
+        self.model.value, self.method.value = rec["model"], rec["method"]
+
+    def _stale(self, _optics):
+        if self.session.built is not None and not self.runner.running:
+            self.status.value = "optics changed: the operators are rebuilt at the next run"
+
+    def _refresh_lenslets(self, _rec):
+        self.lenslet.reset_choices()
+
+    def _lenslet_choices(self, _widget=None):
+        rec = self.session.built[1] if self.session.built else None
+        if rec is None:
+            return []
+        return [(f"({ln.row}, {ln.col})", i) for i, ln in enumerate(rec.lenslets)]
+
+    def operator_settings(self) -> dict:
+        layer = self.calibration.value
+        return {
+            "calibration": None if layer is None else calibration_of(layer),
+            "z": (float(self.z_min.value), float(self.z_max.value)),
+            "dz": float(self.dz.value),
+            "model": self.model.value,
+            "method": self.method.value,
+            "stacks": bool(self.stacks.value),
+            "tv": {
+                "sign": self.sign.value,
+                "tv_lambda": float(self.tv_lambda.value) or None,
+                "tv_iterations": int(self.tv_iterations.value),
+            },
+        }
+
+    def run(self, *_):
+        try:
+            spec = self.session.spec()
+        except SsdpcError as e:
+            notify.error(e)
+            return None
+
+        def work(progress, should_stop):
+            return build_reconstructor(spec, progress)
+
+        return self.runner.start(work, lambda rec: self._done(spec, rec), "Operators")
+
+    def _done(self, spec, rec):
+        self.session.built = (spec, rec)
+        self.session.operators_built.emit(rec)
+        return (
+            f"built: {len(rec.z_um)} planes {rec.z_um[0]:g}…{rec.z_um[-1]:g} µm, {len(rec.lenslets)} lit "
+            f"lenslets, {rec.build_seconds:.1f} s"
+        )
+
+    def show_psf(self, *_):
+        rec = self.session.built[1] if self.session.built else None
+        if rec is None or getattr(rec, "psf", None) is None:
+            notify.error("no PSF operators: tick 'directional stacks' and press Build operators first")
+            return None
+        k = self.lenslet.value or 0
+        ln = rec.lenslets[k]
+
+        def work(progress, should_stop):
+            out = []
+            for i, z in enumerate(rec.z_um):
+                out.append(rec.psf.kernels(float(z))[k])
+                progress(i + 1, len(rec.z_um), "PSF")
+            return np.stack(out)
+
+        def done(stack):
+            info = {"source": f"lenslet ({ln.row}, {ln.col})", "medium_index": rec.optics.medium_index}
+            data, kwargs, _ = result_layer(
+                stack,
+                "psf",
+                (rec.dz, rec.pixel_um, rec.pixel_um),
+                (rec.z_um[0], -(stack.shape[1] // 2) * rec.pixel_um, -(stack.shape[2] // 2) * rec.pixel_um),
+                name=f"lenslet ({ln.row}, {ln.col})",
+                info=info,
+            )
+            show_layer(self.viewer, data, kwargs)
+            return f"PSF of lenslet ({ln.row}, {ln.col})"
+
+        return self.runner.start(work, done, "PSF")

@@ -1,0 +1,130 @@
+"""One Session per viewer: the optics and the built operators that every dock widget shares.
+
+napari hands each dock widget opened from the Plugins menu its own proxy of the viewer; the
+session is keyed on the real viewer behind it, so all widgets (and the ssDPC dock) see one model.
+"""
+
+from __future__ import annotations
+
+import weakref
+
+import numpy as np
+from psygnal import Signal
+
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.settings.reconstruction import ReconstructionSettings
+
+__all__ = ["Session", "build_reconstructor", "calibration_of", "real_viewer", "session_for"]
+
+
+class Session:
+    """State shared by the widgets of one viewer: the optics and the last built operators."""
+
+    optics_changed = Signal(object)  # any edit of the optics
+    optics_loaded = Signal(object)  # a new optics file/preset: widgets reset their defaults
+    operators_built = Signal(object)
+
+    def __init__(self):
+        self.optics = Optics.paper()
+        self.built = None  # (spec, Reconstructor)
+        self.operators_widget = None  # weak references, set by the widgets
+        self.reconstruct_widget = None
+
+    def set_optics(self, optics: Optics, loaded: bool = False):
+        self.optics = optics
+        self.optics_changed.emit(optics)
+        if loaded:
+            self.optics_loaded.emit(optics)
+
+    def spec(self) -> dict:
+        """Everything a Reconstructor is built from: the Operators widget's z range, dz, model,
+        method and calibration, and the Reconstruct widget's flat frame and α."""
+        rec = ReconstructionSettings().to_dict()
+        spec = {
+            "optics": self.optics,
+            "calibration": None,
+            "z": (float(rec["z_min_um"]), float(rec["z_max_um"])),
+            "dz": float(rec["dz_um"]),
+            "model": rec["model"],
+            "method": rec["method"],
+            "stacks": False,  # RL stacks only when DPC, stacks, absorption or the PSF are asked for
+            "alpha": rec["tikhonov_alpha"],
+            "tv": {k: rec[k] for k in ("sign", "tv_lambda", "tv_iterations")},
+            "flat": None,
+        }
+        for ref in (self.operators_widget, self.reconstruct_widget):
+            w = ref() if ref is not None else None
+            if w is not None:
+                spec.update(w.operator_settings())
+        return spec
+
+    def matching(self, spec):
+        """The built Reconstructor if it was made from exactly ``spec``, else None."""
+        if self.built is None:
+            return None
+        old, rec = self.built
+        same = all((old[k] is spec[k]) if k in ("optics", "calibration", "flat") else old[k] == spec[k] for k in spec)
+        return rec if same else None
+
+
+_SESSIONS: dict[int, tuple] = {}
+
+
+def real_viewer(viewer):
+    """The viewer behind napari's plugin proxy.
+
+    napari hands every dock widget opened from the Plugins menu its own ``PublicOnlyProxy`` of
+    the viewer; keyed on the proxy, each widget would get its own session and never see the
+    calibration or the optics another one set.
+    """
+    while hasattr(type(viewer), "__wrapped__") or type(viewer).__name__ == "PublicOnlyProxy":
+        inner = getattr(viewer, "__wrapped__", None)
+        if inner is None or inner is viewer:
+            break
+        viewer = inner
+    return viewer
+
+
+def session_for(viewer) -> Session:
+    """The Session of ``viewer`` (one per real viewer, created on first use; proxies share it)."""
+    viewer = real_viewer(viewer)
+    key = id(viewer)
+    ref, session = _SESSIONS.get(key, (None, None))
+    if ref is None or ref() is not viewer:
+        session = Session()
+        _SESSIONS[key] = (weakref.ref(viewer), session)
+        weakref.finalize(viewer, _SESSIONS.pop, key, None)  # free the operators with the viewer
+    return session
+
+
+def calibration_of(layer):
+    """The Calibration stored in a calibration layer's metadata (cached on the metadata dict)."""
+    from napari_ssdpc.calibration.calibrate import Calibration
+
+    info = layer.metadata.get("ssdpc", {})
+    if "_object" not in info:
+        info["_object"] = Calibration.from_dict(info["calibration"], source=f"layer '{layer.name}'")
+    return info["_object"]
+
+
+def build_reconstructor(spec, progress=None):
+    """A core Reconstructor from a session spec (called in the worker thread)."""
+    from napari_ssdpc.reconstruction.pipeline import Reconstructor
+
+    if spec["calibration"] is None:
+        raise SsdpcError("no calibration: run Calibrate on a white frame, or open a calibration JSON")
+    flat = None if spec["flat"] is None else np.asarray(spec["flat"])
+    return Reconstructor(
+        spec["optics"],
+        spec["calibration"],
+        ReconstructionSettings.from_dict(spec["tv"], source="TV settings"),
+        z=spec["z"],
+        dz=spec["dz"],
+        model=spec["model"],
+        method=spec["method"],
+        stacks=spec["stacks"],
+        alpha=spec["alpha"],
+        flat=flat,
+        progress=progress,
+    )
