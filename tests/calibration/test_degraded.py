@@ -22,6 +22,7 @@ from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation import imperfect
 from napari_ssdpc.simulation import simulate as sim
 from napari_ssdpc.simulation.camera import Camera
+from napari_ssdpc.simulation.imaging import array_as_built
 
 PAPER = Optics.paper()
 GRID = Grid.nominal(PAPER, axis_offset_px=(21.3, -33.7), rotation_deg=4.0)
@@ -39,12 +40,7 @@ def optics_with_pitch(pitch_px: float) -> Optics:
 def calibrate_degraded(optics, grid, *, array=None, degrade=None, camera=None, seed=0):
     """Calibrate a degraded white frame; return (worst EI-centre error px, tolerance px,
     relative radius error, the calibration)."""
-    cam = camera or Camera()
-    truth = grid.lenslets(optics)
-    if array is not None:
-        truth, centres = array.apply(grid, truth, optics)
-    else:
-        centres = grid.lattice_px([ln.row for ln in truth], [ln.col for ln in truth]).reshape(-1, 2)
+    grid, cam, truth, centres = array_as_built(optics, grid, camera, array)
     intensity = sim.white_intensity(optics, grid, cam, array=array)
     if degrade is not None:
         intensity = degrade(intensity, centres, optics.ei_radius_px)

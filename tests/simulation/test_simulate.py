@@ -1,4 +1,4 @@
-"""Tests of the forward simulator (core/simulate.py, core/phantoms.py, core/camera.py).
+"""Tests of the forward simulator (simulation/: simulate, multislice, imaging, sample_free, phantoms, camera).
 
 Most tests use the paper's optics with a smaller iris (field radius 30 µm instead of
 61.3 µm) so that a simulation takes seconds; the optics of the lens train, the
