@@ -15,7 +15,8 @@ from napari_ssdpc.physics.transfer import (
     paper_transfer_functions,
     weak_object_transfer_functions,
 )
-from napari_ssdpc.settings.optics import Optics, circle_overlap_fraction
+from napari_ssdpc.settings.lenslets import circle_overlap_fraction
+from napari_ssdpc.settings.optics import Optics
 
 
 @pytest.fixture(scope="module")

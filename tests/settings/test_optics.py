@@ -9,7 +9,8 @@ import yaml
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.physics.design import design
-from napari_ssdpc.settings.optics import PAPER_OPTICS, Optics, circle_overlap_fraction
+from napari_ssdpc.settings.lenslets import circle_overlap_fraction
+from napari_ssdpc.settings.optics import PAPER_OPTICS, Optics
 
 
 @pytest.fixture

@@ -18,7 +18,7 @@ import numpy as np
 from scipy import ndimage, optimize
 
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.settings.optics import circle_overlap_fraction
+from napari_ssdpc.settings.lenslets import circle_overlap_fraction
 
 
 def ei_brightness(img, centres, radius, inner=0.5):

@@ -35,7 +35,8 @@ from napari_ssdpc.calibration.result import CALIBRATION_FORMAT, CALIBRATION_VERS
 from napari_ssdpc.calibration.views import extract_views, insert_views
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.physics.lattice import Grid, xy_pair
-from napari_ssdpc.settings.optics import Lenslet, Optics, circle_overlap_fraction, lattice_cell
+from napari_ssdpc.settings.lenslets import Lenslet, circle_overlap_fraction, lattice_cell
+from napari_ssdpc.settings.optics import Optics
 
 __all__ = [
     "CALIBRATION_FORMAT",

@@ -17,7 +17,8 @@ import numpy as np
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.files import atomic_write
 from napari_ssdpc.physics.lattice import Grid, xy_pair
-from napari_ssdpc.settings.optics import Lenslet, Optics
+from napari_ssdpc.settings.lenslets import Lenslet
+from napari_ssdpc.settings.optics import Optics
 
 CALIBRATION_FORMAT = "napari-ssdpc-calibration"
 CALIBRATION_VERSION = 1

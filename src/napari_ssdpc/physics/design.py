@@ -17,7 +17,8 @@ import math
 import numpy as np
 
 from napari_ssdpc.physics.transfer import lenslet_case
-from napari_ssdpc.settings.optics import Lenslet, Optics
+from napari_ssdpc.settings.lenslets import Lenslet
+from napari_ssdpc.settings.optics import Optics
 
 __all__ = ["MIN_STRADDLING", "design", "design_table", "design_warnings"]
 

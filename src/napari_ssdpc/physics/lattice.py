@@ -18,7 +18,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from napari_ssdpc.settings.optics import Lenslet, Optics, lattice_cell
+from napari_ssdpc.settings.lenslets import Lenslet, lattice_cell
+from napari_ssdpc.settings.optics import Optics
 
 
 @dataclass(frozen=True)

@@ -44,7 +44,8 @@ import scipy.fft as sfft
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.physics.pupil import axial_frequency, mean_tilt, soft_disk, subaperture_pupil
-from napari_ssdpc.settings.optics import Lenslet, Optics
+from napari_ssdpc.settings.lenslets import Lenslet
+from napari_ssdpc.settings.optics import Optics
 
 
 def _boxed_pupil(optics: Optics, u_k, shape, du):

@@ -36,7 +36,8 @@ import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.physics.pupil import axial_frequency, soft_disk, subaperture_pupil
-from napari_ssdpc.settings.optics import HALVES, PAIRS, Lenslet, Optics
+from napari_ssdpc.settings.lenslets import HALVES, PAIRS, Lenslet
+from napari_ssdpc.settings.optics import Optics
 
 #: In-focus peak |H_DPC| below which the phase is too weak to invert (see docs/operators.md).
 WEAK_CONTRAST = 0.1

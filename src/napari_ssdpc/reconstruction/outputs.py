@@ -15,7 +15,7 @@ from typing import Any, Literal
 import numpy as np
 
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.settings.optics import HALVES, PAIRS
+from napari_ssdpc.settings.lenslets import HALVES, PAIRS
 
 __all__ = ["QUANTITIES", "SAVE_CHOICES", "Quantity", "images", "layout", "parse_save"]
 

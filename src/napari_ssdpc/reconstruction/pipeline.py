@@ -44,7 +44,8 @@ from napari_ssdpc.reconstruction.dpc import dpc_image, phase_to_delta_n, refract
 from napari_ssdpc.reconstruction.forward import ViewModel
 from napari_ssdpc.reconstruction.regularised import TvInversion, padded_planes
 from napari_ssdpc.reconstruction.wotf import WotfInversion
-from napari_ssdpc.settings.optics import HALVES, PAIRS, Optics
+from napari_ssdpc.settings.lenslets import HALVES, PAIRS
+from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.settings.reconstruction import DEFAULT_ALPHA, PHASE_METHODS, TRANSFER_MODELS, ReconstructionSettings
 
 __all__ = ["Cancelled", "Reconstructor", "Result", "estimate_dark", "z_grid"]

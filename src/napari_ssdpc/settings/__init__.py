@@ -5,7 +5,9 @@ one-line errors that name the key, the value and the fix.
 """
 
 from napari_ssdpc.settings.config import RunConfig
-from napari_ssdpc.settings.optics import MLA, Lenslet, Objective, Optics, Sensor
+from napari_ssdpc.settings.lenslets import Lenslet
+from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.settings.parts import MLA, Objective, Sensor
 from napari_ssdpc.settings.reconstruction import ReconstructionSettings
 
 __all__ = ["MLA", "Lenslet", "Objective", "Optics", "ReconstructionSettings", "RunConfig", "Sensor"]

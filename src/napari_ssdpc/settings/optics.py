@@ -15,9 +15,8 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import yaml
@@ -26,163 +25,10 @@ from pydantic import Field, model_validator
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.settings.base import SettingsModel, bounded
 from napari_ssdpc.settings.files import read_mapping
+from napari_ssdpc.settings.lenslets import Lenslet, circle_overlap_fraction, lattice_cell
+from napari_ssdpc.settings.parts import MLA, PART_KEYS, Objective, Sensor
 
-__all__ = [
-    "GRIDS",
-    "HALVES",
-    "MLA",
-    "PAIRS",
-    "PAPER_OPTICS",
-    "Lenslet",
-    "Objective",
-    "Optics",
-    "Sensor",
-    "circle_overlap_fraction",
-    "lattice_cell",
-]
-
-GRIDS = ("square", "hex")
-
-
-def lattice_cell(grid: str = "square") -> np.ndarray:
-    """The unit cell of a lenslet array, in pitches, in the MLA frame (x right, y down).
-
-    Parameters
-    ----------
-    grid : {"square", "hex"}
-
-    Returns
-    -------
-    ndarray, (2, 2)
-        Columns: the step of one column and of one row. Square: (1, 0) and (0, 1). Hex: (1, 0)
-        and (1/2, √3/2), so that each row is offset by half a pitch and every lenslet has six
-        neighbours at one pitch.
-    """
-    if grid == "hex":
-        return np.array([[1.0, 0.5], [0.0, math.sqrt(3.0) / 2.0]])
-    if grid == "square":
-        return np.eye(2)
-    raise SsdpcError(f"grid must be one of {', '.join(GRIDS)}, got {grid!r}")
-
-
-#: The four halves of paper Eq. 5, by the sign of the lenslet position a (x right, y down):
-#: "up" = a_y < 0, "down" = a_y > 0, "left" = a_x < 0, "right" = a_x > 0.
-HALVES = ("up", "down", "left", "right")
-#: The two DPC pairs of paper Eq. 1: I_DPC = (first - second) / (first + second).
-PAIRS = {"ud": ("up", "down"), "lr": ("left", "right")}
-
-
-@dataclass(frozen=True)
-class Lenslet:
-    """One lenslet that overlaps the objective pupil.
-
-    ``row``/``col`` index the lattice: the lenslet centre sits at
-    ``p C (col + 0.5, row + 0.5)`` from the reference lattice vertex, with C the unit cell of
-    :func:`lattice_cell` (the identity for a square array, so ``((col + 0.5) p, (row + 0.5) p)``
-    and the four central lenslets are (-1,-1), (-1,0), (0,-1) and (0,0)). ``a_um`` is the centre
-    measured from the optical axis in the MLA plane (x right, y down), ``u`` the
-    sub-aperture centre frequency (cycles/µm), ``fraction`` the part of the lenslet
-    aperture inside the objective pupil.
-    """
-
-    row: int
-    col: int
-    a_um: tuple[float, float]
-    u: tuple[float, float]
-    fraction: float
-
-    @property
-    def halves(self) -> tuple[str, ...]:
-        """Halves of paper Eq. 5 this lenslet belongs to (:data:`HALVES`)."""
-        ax, ay = self.a_um
-        out = []
-        if ay < 0:
-            out.append("up")
-        elif ay > 0:
-            out.append("down")
-        if ax < 0:
-            out.append("left")
-        elif ax > 0:
-            out.append("right")
-        return tuple(out)
-
-
-def circle_overlap_fraction(d, r_small, r_big):
-    """Fraction of a circle of radius ``r_small`` inside a circle of radius ``r_big``.
-
-    Parameters
-    ----------
-    d : array_like
-        Distance between the centres (any length unit, the same for all three).
-    r_small, r_big : float
-        The two radii.
-
-    Returns
-    -------
-    ndarray, float64, shape of ``d``
-        Area fraction of the small circle inside the big one (exact lens-area formula).
-    """
-    d = np.abs(np.asarray(d, dtype=float))
-    r, R = float(r_small), float(r_big)
-    out = np.zeros_like(d)
-    inside = d <= abs(R - r)
-    out[inside] = 1.0 if r <= R else (R / r) ** 2
-    part = (~inside) & (d < R + r)
-    dp = d[part]
-    a1 = r * r * np.arccos(np.clip((dp * dp + r * r - R * R) / (2 * dp * r), -1, 1))
-    a2 = R * R * np.arccos(np.clip((dp * dp + R * R - r * r) / (2 * dp * R), -1, 1))
-    a3 = 0.5 * np.sqrt(np.clip((-dp + r + R) * (dp + r - R) * (dp - r + R) * (dp + r + R), 0, None))
-    out[part] = (a1 + a2 - a3) / (math.pi * r * r)
-    return out
-
-
-class Objective(SettingsModel):
-    """The microscope objective."""
-
-    magnification: float = bounded(..., 1.0, 200.0, "lateral magnification with its tube lens (x)")
-    na: float = bounded(..., 0.01, 1.7, "numerical aperture")
-    tube_lens_mm: float = bounded(..., 20.0, 1000.0, "tube-lens focal length, mm (160-200 mm is usual)")
-
-
-class MLA(SettingsModel):
-    """The microlens array, in a plane conjugate to the objective's back focal plane."""
-
-    pitch_um: float = bounded(..., 10.0, 10000.0, "lenslet pitch, µm (500 µm is 0.5 mm)")
-    focal_length_mm: float = bounded(..., 0.1, 500.0, "lenslet focal length, mm")
-    lenslet_radius_um: float = bounded(..., 5.0, 10000.0, "lenslet aperture radius, µm")
-    grid: Literal["square", "hex"] = Field("square", description="lattice of the array: square or hex")
-
-    @model_validator(mode="after")
-    def _radius_fits(self) -> MLA:
-        if self.lenslet_radius_um > 0.5 * self.pitch_um * 1.0001:
-            raise ValueError(
-                f"mla.lenslet_radius_um {self.lenslet_radius_um} exceeds half the pitch {self.pitch_um} µm; "
-                "check mla.lenslet_radius_um"
-            )
-        return self
-
-
-class Sensor(SettingsModel):
-    """The camera."""
-
-    pixel_um: float = bounded(..., 0.5, 50.0, "pixel pitch, µm")
-    width_px: int = bounded(..., 16, 100000, "frame width, px")
-    height_px: int = bounded(..., 16, 100000, "frame height, px")
-
-
-#: Flat attribute names of :class:`Optics` that live in a part (for ``Optics.replace``).
-_PART_KEYS = {
-    "magnification": ("objective", "magnification"),
-    "na": ("objective", "na"),
-    "tube_lens_mm": ("objective", "tube_lens_mm"),
-    "pitch_um": ("mla", "pitch_um"),
-    "mla_focal_length_mm": ("mla", "focal_length_mm"),
-    "lenslet_radius_um": ("mla", "lenslet_radius_um"),
-    "grid": ("mla", "grid"),
-    "pixel_um": ("sensor", "pixel_um"),
-    "width_px": ("sensor", "width_px"),
-    "height_px": ("sensor", "height_px"),
-}
+__all__ = ["PAPER_OPTICS", "Optics"]
 
 
 class Optics(SettingsModel):
@@ -297,8 +143,8 @@ class Optics(SettingsModel):
         """A validated copy with some fields changed; parts' fields may be named flat (``na=0.3``)."""
         d = self.to_dict()
         for key, value in changes.items():
-            if key in _PART_KEYS:
-                part, sub = _PART_KEYS[key]
+            if key in PART_KEYS:
+                part, sub = PART_KEYS[key]
                 d[part] = {**d[part], sub: value}
             else:
                 d[key] = value

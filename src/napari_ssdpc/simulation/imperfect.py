@@ -19,7 +19,8 @@ from scipy import ndimage
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.lattice import Grid
-from napari_ssdpc.settings.optics import Lenslet, Optics, circle_overlap_fraction, lattice_cell
+from napari_ssdpc.settings.lenslets import Lenslet, circle_overlap_fraction, lattice_cell
+from napari_ssdpc.settings.optics import Optics
 
 
 @dataclass(frozen=True)
