@@ -9,7 +9,8 @@ import pytest
 
 from napari_ssdpc.cli.main import main
 from napari_ssdpc.reconstruction.pipeline import Reconstructor
-from napari_ssdpc.validation.bench import format_report, run_bench
+from napari_ssdpc.validation.bench import run_bench
+from napari_ssdpc.validation.bench_report import format_report
 from napari_ssdpc.validation.cases import Case
 from napari_ssdpc.validation.reference import layout, max_relative_difference, reconstruct_reference
 

@@ -6,7 +6,7 @@ everything else is measured on the frame:
 1. EI disks (``disks``): a ring filter finds them, a robust circle through the rim
    points of each (notches, dust and sample content rejected as outliers) and a
    soft-disk rim fit give every EI its own sub-pixel centre and radius.
-2. Lattice (``lattice_fit``): an affine lattice (pitch, rotation, unequal axes, shear)
+2. Lattice (``lattice_fit``, ``refine``): an affine lattice (pitch, rotation, unequal axes, shear)
    is fitted to those centres; it labels the lenslets and fills in the ones whose rim
    could not be measured. Each lenslet keeps its measured centre and its deviation from
    the lattice (a warning above 2 % of the pitch). Tolerances scale with the pitch.
@@ -28,9 +28,10 @@ import warnings
 import numpy as np
 
 from napari_ssdpc.calibration.axis import all_cells, decide_kind, ei_brightness, fit_axis
-from napari_ssdpc.calibration.disks import Candidates, Circle, find_disks, fit_rim, noise_sigma, rim_circle
-from napari_ssdpc.calibration.lattice_fit import MIN_AFFINE, MIN_EIS, AffineLattice, assign, fit_affine
+from napari_ssdpc.calibration.disks import Candidates, Circle, find_disks, noise_sigma, rim_circle
+from napari_ssdpc.calibration.lattice_fit import MIN_AFFINE, AffineLattice, assign
 from napari_ssdpc.calibration.overlay import overlay_png
+from napari_ssdpc.calibration.refine import OUTLIER, SMALL_EI_PX, all_rims, fit_lattice, outshone, refine_centres
 from napari_ssdpc.calibration.result import CALIBRATION_FORMAT, CALIBRATION_VERSION, Calibration, Views, validated
 from napari_ssdpc.calibration.views import extract_views, insert_views
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
@@ -54,13 +55,8 @@ KINDS = ("auto", "white", "flat", "sample")
 
 PRIOR_TOLERANCE = 0.05  # measured pitch and EI radius may differ from the optics' by 5 %
 DEVIATION_WARN = 0.02  # warn when a lenslet sits more than 2 % of the pitch off the lattice
-OUTLIER = 0.08  # a rim fit more than 8 % of the pitch off the lattice is not trusted
-#: With few EIs, a centre the others predict worse than this fraction of the pitch (and 4 x worse
-#: than the rest) is dropped: one pulled rim would otherwise move the whole lattice.
-LOO_OUTLIER = 0.005
 MAX_LATTICE_RMS = 0.05  # rms of the EI centres about the lattice, as a fraction of the pitch
 MAX_AXIS_RMS = 0.05  # rms of the brightness-pattern fit, relative to full brightness
-DIM_EDGE = 0.25  # EIs with a rim less steep than this x the median take their lattice position
 FEW_LENSLETS = 20  # with fewer lit lenslets the illumination envelope is not fitted
 # EI brightness is the mean inside this fraction of the EI radius: the centre, away from
 # the diffraction-blurred rim, without a sample; nearly the whole EI with a sample, which
@@ -103,130 +99,6 @@ def _measure_disks(img, cand: Candidates, radius, pitch):
         if any(math.hypot(x - q[0].centre[0], y - q[0].centre[1]) < 0.3 * pitch for q in out):
             continue
         out.append((circ, float(s)))
-    return out
-
-
-_OFFSETS = np.array([(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)], float)
-
-
-def _all_rims(img, lat: AffineLattice, circles, n_idx):
-    """Rim circles of every lattice cell in the frame, measured again away from the
-    neighbours' touching zones (the lattice now says where they are); cells the detection
-    missed (dim EIs at the pupil edge) count when their rim is at least 5 % as steep
-    as the median rim. Returns the circles, their indices (K, 2) and whether each rim is
-    at least a quarter as steep as the median (bright enough to place its EI on its own)."""
-    r_med = float(np.median([c.radius for c in circles]))
-    edge_med = float(np.median([c.edge for c in circles]))
-    found = {tuple(int(v) for v in n): c for c, n in zip(circles, n_idx)}
-    cells = np.rint(lat.index(all_cells(lat, img.shape))).astype(int)
-    out, idx = [], []
-    for n in cells:
-        key = (int(n[0]), int(n[1]))
-        guess = found[key].centre if key in found else lat.centres(n)
-        c = rim_circle(img, guess, r_med, neighbours=lat.centres(n + _OFFSETS))
-        if c is None and key in found:
-            c = found[key]
-        if (
-            c is None
-            or c.inlier_frac < 0.4
-            or c.edge < 0.05 * edge_med
-            or abs(c.radius / r_med - 1) > 0.2
-            or math.hypot(*(c.centre - lat.centres(n))) > 0.15 * lat.pitch
-        ):
-            continue
-        out.append(c)
-        idx.append(n)
-    bright = np.array([c.edge >= DIM_EDGE * edge_med for c in out], bool)
-    return out, np.array(idx, float).reshape(-1, 2), bright
-
-
-def _refine(img, lat: AffineLattice, circles, n_idx, dark):
-    """Sub-pixel rim fit of every EI; falls back to its robust circle.
-
-    Returns centres (K, 2), σ (K,), radii (K,) and whether the rim fit held (K,)."""
-    r_med = float(np.median([c.radius for c in circles]))
-    first = [
-        fit_rim(img, c, lat.centres(n + _OFFSETS), float(np.clip(0.25 * r_med, 2, 12)), dark)
-        for c, n in zip(circles[:12], n_idx[:12])
-    ]
-    widths = [f.width for f in first if f is not None]
-    delta = float(np.clip(5 * np.median(widths) + 2, 2, 0.3 * r_med)) if widths else float(np.clip(0.2 * r_med, 2, 12))
-    xy, sig, rad, held = [], [], [], []
-    for c, n in zip(circles, n_idx):
-        f = fit_rim(img, c, lat.centres(n + _OFFSETS), delta, dark)
-        held.append(f is not None and math.hypot(*(f.centre - c.centre)) < max(0.5, 0.05 * c.radius))
-        if f is not None and held[-1]:
-            xy.append(f.centre)
-            sig.append(f.sigma)
-            rad.append(f.radius)
-        else:
-            xy.append(c.centre)
-            sig.append(c.rms / math.sqrt(max(c.inliers.sum(), 1) / 2))
-            rad.append(c.radius)
-    return np.array(xy), np.array(sig), np.array(rad), np.array(held, bool)
-
-
-SMALL_EI_PX = 20.0  # below this EI radius the neighbours' blurred skirts reach the rim
-
-
-def _outshone(img, xy, n, radius):
-    """EIs whose rim a neighbour's skirt pulls, so that the lattice places them better:
-    those dimmer than 0.85 x their brightest neighbour (the edge of the pupil) and, for
-    small EIs (radius under ``SMALL_EI_PX``), also those with a neighbour dimmer than 0.85 x
-    themselves (the outer ring of lit EIs)."""
-    b = ei_brightness(img, xy, radius, 0.5)
-    level = {tuple(int(v) for v in k): float(v) for k, v in zip(n, b)}
-    out = np.zeros(len(xy), bool)
-    for i, k in enumerate(n):
-        nb = np.array(
-            [level.get((int(k[0]) + dx, int(k[1]) + dy), 0.0) for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy]
-        )
-        out[i] = bool(b[i] < 0.85 * nb.max()) or (radius < SMALL_EI_PX and bool(nb.min() < 0.85 * b[i]))
-    return out
-
-
-def _lattice(xy, n, sig, pitch, flip, usable, cell):
-    """Affine lattice through the usable measured centres (weights 1/σ²), without outliers.
-
-    Returns the lattice, the residuals (K, 2) and a mask of the trusted centres."""
-    w = 1.0 / np.maximum(sig, 2e-4 * pitch) ** 2
-    trusted = usable.copy() if usable.sum() >= MIN_EIS else np.ones(len(xy), bool)
-    lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted], cell)
-    res = xy - lat.centres(n)
-    for _ in range(3):
-        rr = np.hypot(res[:, 0], res[:, 1])
-        new = trusted & (rr < max(OUTLIER * pitch, 5 * 1.4826 * float(np.median(rr[trusted]))))
-        if new.sum() < MIN_EIS or np.array_equal(new, trusted):
-            break
-        trusted = new
-        lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted], cell)
-        res = xy - lat.centres(n)
-    if MIN_EIS < trusted.sum() < MIN_AFFINE:
-        trusted = _leave_one_out(xy, n, w, flip, cell, trusted, pitch)
-        lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted], cell)
-        res = xy - lat.centres(n)
-    return lat, res, trusted
-
-
-def _leave_one_out(xy, n, w, flip, cell, trusted, pitch):
-    """Few EIs fix a similarity lattice with little redundancy, so a median test cannot see one
-    pulled rim. Fit without each centre in turn; where leaving one out makes the others agree
-    (their scatter, per degree of freedom) and the others predict it worse than ``LOO_OUTLIER``
-    of the pitch and 4 x that scatter, drop it, and look again."""
-    idx = np.flatnonzero(trusted)
-    while len(idx) > MIN_EIS:
-        err, scatter = np.empty(len(idx)), np.empty(len(idx))
-        for j, i in enumerate(idx):
-            rest = np.delete(idx, j)
-            lat, res = fit_affine(xy[rest], n[rest], flip, w[rest], cell)
-            err[j] = float(np.hypot(*(xy[i] - lat.centres(n[i : i + 1])[0])))
-            scatter[j] = float(np.sqrt(np.sum(res**2) / max(2 * len(rest) - 4, 1)))
-        best = int(np.argmin(scatter))
-        if err[best] < max(LOO_OUTLIER * pitch, 4 * scatter[best]):
-            break
-        idx = np.delete(idx, best)
-    out = np.zeros(len(xy), bool)
-    out[idx] = True
     return out
 
 
@@ -286,12 +158,12 @@ def calibrate(frame, optics: Optics, *, kind: str = "auto", guess=None) -> Calib
         lattice_cell(optics.grid),
     )
     circles = [c for c, keep in zip(circles, on) if keep]
-    circles, n_idx, bright = _all_rims(img, lat, circles, n_idx)
-    xy, sig, radii, held = _refine(img, lat, circles, n_idx, cand.dark)
+    circles, n_idx, bright = all_rims(img, lat, circles, n_idx)
+    xy, sig, radii, held = refine_centres(img, lat, circles, n_idx, cand.dark)
     # a neighbour's skirt pulls some rims; the soft-disk fit models it on EIs that are not small
-    reliable = ~_outshone(img, xy, n_idx, float(np.median(radii)))
+    reliable = ~outshone(img, xy, n_idx, float(np.median(radii)))
     reliable |= held & (float(np.median(radii)) >= SMALL_EI_PX)
-    lat, res, trusted = _lattice(xy, n_idx, sig, lat.pitch, flip, reliable, lat.cell)
+    lat, res, trusted = fit_lattice(xy, n_idx, sig, lat.pitch, flip, reliable, lat.cell)
     _check_prior(lat, float(np.median(radii[trusted])), optics)
     r_ei = float(np.median(radii[trusted]))
     rms = float(np.sqrt(np.mean(np.sum(res[trusted] ** 2, axis=1))))

@@ -329,7 +329,8 @@ def cmd_bench(args):
     args : argparse.Namespace
         The parsed options of `ssdpc bench` (see ``ssdpc bench --help``).
     """
-    from napari_ssdpc.validation.bench import default_cache, format_report, run_bench
+    from napari_ssdpc.validation.bench import default_cache, run_bench
+    from napari_ssdpc.validation.bench_report import format_report
 
     if args.cache is not None:
         cache = Path(args.cache)
