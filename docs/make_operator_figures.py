@@ -15,7 +15,8 @@ import scipy.fft as sfft
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle
 
-from napari_ssdpc.physics.transfer import dpc_transfer_functions, lenslet_case
+from napari_ssdpc.physics.dpc_transfer import dpc_transfer_functions
+from napari_ssdpc.physics.transfer import lenslet_case
 from napari_ssdpc.settings.optics import Optics
 
 OUT = Path(__file__).resolve().parent / "images"

@@ -250,7 +250,7 @@ def test_12_bench_cache_that_is_a_file(cli, tmp_path):
 
 
 def test_12_bench_without_a_writable_home_cache(cli, tmp_path, monkeypatch):
-    from napari_ssdpc.validation import bench
+    from napari_ssdpc.validation import bench, bench_report
 
     home = tmp_path / "home"
     home.mkdir()
@@ -262,7 +262,7 @@ def test_12_bench_without_a_writable_home_cache(cli, tmp_path, monkeypatch):
         monkeypatch.setattr(os, "access", lambda p, mode: False if Path(p) == home else real(p, mode))
     # the benchmark itself is measured elsewhere (tests/validation): here only where its cache goes
     monkeypatch.setattr(bench, "run_bench", lambda **kw: seen.update(kw) or {})
-    monkeypatch.setattr(bench, "format_report", lambda report: "report")
+    monkeypatch.setattr(bench_report, "format_report", lambda report: "report")
     try:
         rc, _ = cli(["bench", "--quick"])
     finally:

@@ -13,8 +13,9 @@ import tifffile
 
 from napari_ssdpc.cli.main import main
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.io.frame_source import FrameSource, PagedSeries
 from napari_ssdpc.io.frames import read_ome_zarr
-from napari_ssdpc.io.series import FrameSource, Recipe, _PagedSeries, done_frames, reconstruct_series
+from napari_ssdpc.io.series import Recipe, done_frames, reconstruct_series
 from napari_ssdpc.reconstruction.backend import gpu_available
 
 SETTINGS = dict(z=(-20.0, 20.0), dz=10.0, iterations=2, method="rl", stacks=True)
@@ -106,7 +107,7 @@ def test_frames_are_streamed_not_loaded(data, recipe, rec, tmp_path):
     tifffile.imwrite(plain, frames, photometric="minisblack")
     tifffile.imwrite(packed, frames, photometric="minisblack", compression="zlib")
     assert isinstance(FrameSource(plain)._open(), np.memmap)
-    assert isinstance(FrameSource(packed)._open(), _PagedSeries)
+    assert isinstance(FrameSource(packed)._open(), PagedSeries)
     np.testing.assert_array_equal(FrameSource(packed)[7], frames[7])
     peaks = {}
     for n in (2, 12):

@@ -16,8 +16,9 @@ import pytest
 import zarr.storage._local as zlocal
 
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.io.frame_source import FrameSource
 from napari_ssdpc.io.frames import read_ome_zarr
-from napari_ssdpc.io.series import FrameSource, Recipe, reconstruct_series
+from napari_ssdpc.io.series import Recipe, reconstruct_series
 from napari_ssdpc.io.store import StoreLock, done_frames, read_complete
 
 

@@ -6,10 +6,9 @@ import pytest
 import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcWarning
+from napari_ssdpc.physics.dpc_transfer import dpc_from_halves, dpc_transfer_functions
 from napari_ssdpc.physics.pupil import axial_frequency
 from napari_ssdpc.physics.transfer import (
-    dpc_from_halves,
-    dpc_transfer_functions,
     lenslet_case,
     lenslet_transfer_functions,
     paper_transfer_functions,

@@ -220,8 +220,9 @@ def cmd_reconstruct(args):
         The parsed options of `ssdpc reconstruct` (see ``ssdpc reconstruct --help``).
     """
     from napari_ssdpc.calibration.calibrate import Calibration
+    from napari_ssdpc.io.frame_source import FrameSource
     from napari_ssdpc.io.frames import read_frame, write_ome_tiffs
-    from napari_ssdpc.io.series import FrameSource, Recipe
+    from napari_ssdpc.io.series import Recipe
     from napari_ssdpc.progress import tqdm_callback
 
     out = Path(args.output)

@@ -2,11 +2,11 @@
 the wave-optics PSF (paper Eq. 6) and the weak-object transfer functions (paper Eqs. 2-4)."""
 
 from napari_ssdpc.physics.design import design, design_table, design_warnings
+from napari_ssdpc.physics.dpc_transfer import dpc_transfer_functions
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.physics.psf import LensletPSF, reference_psf
 from napari_ssdpc.physics.pupil import axial_frequency, eta, mean_tilt, soft_disk, subaperture_pupil
 from napari_ssdpc.physics.transfer import (
-    dpc_transfer_functions,
     lenslet_case,
     lenslet_transfer_functions,
     weak_object_transfer_functions,

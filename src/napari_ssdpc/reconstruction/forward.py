@@ -70,7 +70,7 @@ class ViewModel:
         self.shape = tuple(int(n) for n in shape)
         self.pixel_um = float(pixel_um)
         self.z_um = np.atleast_1d(np.asarray(z_um, float))
-        setup = transfer._LensletSetup(optics, lenslets, self.shape, float(pixel_um))
+        setup = transfer.LensletSetup(optics, lenslets, self.shape, float(pixel_um))
         i0_model = setup.i0
         if np.any(i0_model <= 0):
             raise SsdpcError("a view without direct light cannot be inverted; leave dark-field lenslets out")

@@ -35,7 +35,7 @@ import scipy.fft as sfft
 from napari_ssdpc.calibration.calibrate import Calibration, extract_views
 from napari_ssdpc.calibration.saturation import warn_saturation
 from napari_ssdpc.errors import Cancelled, SsdpcError, SsdpcWarning
-from napari_ssdpc.physics import transfer
+from napari_ssdpc.physics import dpc_transfer, transfer
 from napari_ssdpc.physics.design import design
 from napari_ssdpc.physics.psf import LensletPSF
 from napari_ssdpc.reconstruction.backend import get_backend
@@ -269,12 +269,12 @@ class Reconstructor:
             norm = {h: np.mean([h_phase[k] / i0[k] for k in m], axis=0) for h, m in self.halves.items()}
             self.h_dpc = {ax: (0.5 * (norm[a] - norm[b])).astype(np.complex64) for ax, (a, b) in PAIRS.items()}
         else:
-            tf = transfer.dpc_transfer_functions(
+            tf = dpc_transfer.dpc_transfer_functions(
                 opt, self.lenslets, shape, self.pixel_um, 0.0, model="paper", warn=False
             )
             self.h_dpc = {ax: tf["dpc_phase"][ax] for ax in PAIRS}
         peak = min(float(np.abs(h).max()) for h in self.h_dpc.values())
-        if peak < transfer.WEAK_CONTRAST:
+        if peak < dpc_transfer.WEAK_CONTRAST:
             warnings.warn(
                 f"in-focus DPC phase transfer peaks at {peak:.3f}: phase contrast is too weak to "
                 "invert; close the condenser aperture",

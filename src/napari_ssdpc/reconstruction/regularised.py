@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.fft as sfft
@@ -41,6 +40,7 @@ import scipy.fft as sfft
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.reconstruction.backend import in_threads
 from napari_ssdpc.reconstruction.forward import ViewModel, apply
+from napari_ssdpc.reconstruction.tv_report import TvReport
 
 __all__ = ["LAMBDA_PER_NOISE", "SIGNS", "TvInversion", "TvReport", "padded_planes"]
 
@@ -59,57 +59,6 @@ PROBE = 12
 LAMBDA_PER_NOISE = 1.0
 #: ADMM penalty ρ relative to the strongest lateral frequency's data weight Σ_k,z |A|²/Z.
 RHO_PER_DATA = 0.5
-
-
-@dataclass
-class TvReport:
-    """What the solver did, for the metadata and the convergence plot.
-
-    Attributes
-    ----------
-    iterations : int
-        ADMM iterations run.
-    converged : bool
-        The relative change fell below the tolerance.
-    objective : list of float
-        ½‖Aφ − c‖² + λ TV(φ) per iteration (the data term in noise-weighted contrast units).
-    relative_change : list of float
-        ‖φ_i − φ_{i−1}‖ / ‖φ_i‖ per iteration.
-    noise : float
-        The views' noise, contrast units (rms per pixel, weighted mean over the views).
-    lam : float
-        The λ used (absolute, in the units of the objective).
-    lam_auto : bool
-        λ came from the noise.
-    sign : str
-        The sign constraint used ('denser', 'lighter' or 'any').
-    residual_over_noise : float
-        ‖Aφ − c‖² over the band divided by its expectation from the noise alone.
-    """
-
-    iterations: int = 0
-    converged: bool = False
-    objective: list = field(default_factory=list)
-    relative_change: list = field(default_factory=list)
-    noise: float = float("nan")
-    lam: float = float("nan")
-    lam_auto: bool = True
-    sign: str = "any"
-    residual_over_noise: float = float("nan")
-    sign_objectives: dict = field(default_factory=dict)
-
-    def to_dict(self) -> dict:
-        """Plain numbers for the result's metadata."""
-        return {
-            "tv_iterations_run": self.iterations,
-            "tv_converged": self.converged,
-            "tv_objective_final": self.objective[-1] if self.objective else None,
-            "tv_noise": self.noise,
-            "tv_lambda": self.lam,
-            "tv_lambda_auto": self.lam_auto,
-            "tv_sign": self.sign,
-            "tv_residual_over_noise": self.residual_over_noise,
-        }
 
 
 def padded_planes(z_um, r_z_um: float, pad_um: float | None = None) -> tuple[np.ndarray, slice]:

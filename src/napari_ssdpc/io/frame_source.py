@@ -1,0 +1,145 @@
+"""Raw frames of a series, read one at a time: a memory map of an uncompressed TIFF, else one
+page at a time, or an in-memory array; truncated and foreign files are refused up front."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.files import os_error
+
+__all__ = ["FrameSource", "PagedSeries"]
+
+
+class FrameSource:
+    """Raw frames (t, y, x) of a TIFF series, read one at a time; or an in-memory array.
+
+    Pickles as its path (Dask workers reopen the file themselves)."""
+
+    def __init__(self, source):
+        self.path = None if isinstance(source, np.ndarray) else Path(source)
+        self._array = source if isinstance(source, np.ndarray) else None
+        self._data = None
+        a = self._open()
+        if a.ndim not in (2, 3):
+            raise SsdpcError(f"{self.name}: expected a 2D frame or a (t, y, x) series, got shape {a.shape}")
+        self.shape = tuple(int(v) for v in a.shape)
+        if a.ndim == 2:
+            self.shape = (1,) + self.shape
+        self.dtype = a.dtype
+
+    @property
+    def name(self) -> str:
+        return "array" if self.path is None else str(self.path.resolve())
+
+    @property
+    def fingerprint(self) -> str:
+        """The path, or for an array a hash of its content."""
+        return self.name if self.path is not None else "array:" + self.identity()["sha256"][:16]
+
+    def identity(self) -> dict:
+        """What the frames are: path, size (bytes), modification time (ns), frame count and the
+        SHA-256 of the file's (or the array's) content.
+
+        Returns
+        -------
+        dict
+        """
+        h = hashlib.sha256()
+        if self.path is None:
+            a = np.ascontiguousarray(self._array)
+            h.update(f"{a.dtype.str}{a.shape}".encode())
+            h.update(a.tobytes())
+            return {
+                "path": "array",
+                "size": int(a.nbytes),
+                "mtime_ns": None,
+                "frames": len(self),
+                "sha256": h.hexdigest(),
+            }
+        try:
+            st = self.path.stat()
+            with open(self.path, "rb") as f:
+                for block in iter(lambda: f.read(1 << 22), b""):
+                    h.update(block)
+        except OSError as e:
+            raise os_error(e, self.path, "reading") from None
+        return {
+            "path": self.name,
+            "size": int(st.st_size),
+            "mtime_ns": int(st.st_mtime_ns),
+            "frames": len(self),
+            "sha256": h.hexdigest(),
+        }
+
+    def _open(self):
+        if self._array is not None:
+            return self._array
+        if self._data is None:
+            self._data = _open_tiff(self.path)
+        return self._data
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __getitem__(self, t) -> np.ndarray:
+        if not 0 <= int(t) < self.shape[0]:
+            raise IndexError(f"frame {t} of {self.shape[0]}")
+        a = self._open()
+        frame = a[int(t)] if a.ndim == 3 else (a[0] if isinstance(a, PagedSeries) else a)
+        return np.array(frame, copy=True)  # detach from the memory map
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_data"] = None
+        return state
+
+
+def _open_tiff(path: Path):
+    """A memory map of an uncompressed TIFF series, else a lazy page-by-page reader."""
+    import tifffile
+
+    if not path.is_file():
+        raise SsdpcError(f"file not found: {path} (check the path)")
+    try:
+        return np.squeeze(tifffile.memmap(path, mode="r"))
+    except Exception:  # compressed, tiled or not contiguous: read page by page
+        pass
+    try:
+        tif = tifffile.TiffFile(path)
+        series = tif.series[0]
+        size = path.stat().st_size
+        frames = int(np.prod(series.shape[:-2])) if len(series.shape) > 2 else 1
+        if len(tif.pages) < frames and not tif.is_imagej:
+            raise SsdpcError(f"{path}: truncated ({len(tif.pages)} of {frames} frames); copy the file again")
+        for k, page in enumerate(tif.pages):  # a truncated copy: refuse it now, not at frame k
+            if any(o + n > size for o, n in zip(page.dataoffsets, page.databytecounts)):
+                raise SsdpcError(f"{path}: truncated (page {k} ends beyond the file's end); copy the file again")
+    except SsdpcError:
+        raise
+    except Exception as e:  # tifffile raises many types for foreign or truncated files
+        raise SsdpcError(
+            f"{path}: not a readable TIFF ({type(e).__name__}); give a complete TIFF or OME-TIFF series"
+        ) from None
+    return PagedSeries(tif, series)
+
+
+class PagedSeries:
+    """(t, y, x) view of a TIFF series that decodes one page per frame."""
+
+    def __init__(self, tif, series):
+        shape = tuple(s for s in series.shape if s != 1)
+        if len(shape) not in (2, 3):
+            raise SsdpcError(f"{tif.filename}: expected a 2D frame or a (t, y, x) series, got shape {series.shape}")
+        self._tif, self.shape, self.dtype = tif, shape, series.dtype
+        self.ndim = len(shape)
+
+    def __getitem__(self, t):
+        try:
+            return self._tif.asarray(key=int(t) if self.ndim == 3 else 0, series=0).reshape(self.shape[-2:])
+        except Exception as e:  # a damaged page
+            name = self._tif.filename
+            raise SsdpcError(f"{name}: frame {t} cannot be read ({type(e).__name__}); check the file") from None
