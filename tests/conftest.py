@@ -57,3 +57,9 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if _GUI_FIXTURES & set(getattr(item, "fixturenames", ())):
             item.add_marker(skip)
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _own_settings_folder(tmp_path_factory):
+    """The napari dock remembers its settings between sessions: keep the tests' out of the home folder."""
+    os.environ["NAPARI_SSDPC_CONFIG"] = str(tmp_path_factory.mktemp("ssdpc-config"))

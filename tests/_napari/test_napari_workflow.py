@@ -17,6 +17,7 @@ import gui_steps as _steps
 from napari_ssdpc._napari import notify as _notify
 from napari_ssdpc._napari import sample_data as _sample_data
 from napari_ssdpc._napari import widgets as _widgets
+from napari_ssdpc._napari.widgets import session as _session
 
 Z, DZ = (-10.0, 10.0), 2.0
 MENU = ("1. Optics", "2. Calibrate", "3. Operators", "4. Reconstruct", "5. Line profile")
@@ -52,3 +53,55 @@ def test_widgets_opened_from_the_plugins_menu_share_one_session_and_reach_an_ri_
     # the bead (n 1.49 in 1.518) at the world origin: Δn < 0 there
     zc, yc, xc = np.round(ri.world_to_data((0.0, 0.0, 0.0))).astype(int)
     assert ri.data[zc, yc, xc] - optics.medium_index < -0.002
+
+
+def test_the_ssdpc_dock_runs_the_workflow_and_fits_a_laptop_screen(make_napari_viewer, qtbot, monkeypatch, tmp_path):
+    """The one dock from the Plugins menu: its tabs are the shared widgets, its settings file is the
+    one the command line reads, and with every dock open the window stays within 1280 x 800."""
+    from napari_ssdpc._napari.widgets.dock import SsdpcDock
+    from napari_ssdpc.settings.config import RunConfig
+
+    shown = []
+    monkeypatch.setattr(_notify, "error", lambda msg: shown.append(str(msg)))
+    viewer = make_napari_viewer(show=True)
+    window = viewer.window._qt_window
+    window.resize(1280, 800)
+    _, dock = viewer.window.add_plugin_dock_widget("napari-ssdpc", "ssDPC")
+    assert isinstance(dock, SsdpcDock) and dock.session is _widgets.session_for(viewer)
+    for name in MENU:  # and every separate widget too
+        viewer.window.add_plugin_dock_widget("napari-ssdpc", name)
+    qtbot.wait(200)
+    size = window.size()
+    assert size.width() <= 1280 and size.height() <= 800, (size.width(), size.height())
+
+    w = {k.lower(): v for k, v in dock.tabs.items()}
+    w["operators"] = w["method"]
+    frame, flat, white, optics = _sample_data.bead_frames()
+    _steps.prepare_bead(viewer, qtbot, w, optics, Z, DZ)
+    w["operators"].sign.value, w["operators"].tv_iterations.value = "lighter", 25
+    w["reconstruct"].iterations.value = 7
+
+    path = dock.save_settings(tmp_path / "run.yaml")
+    cfg = RunConfig.from_yaml(path)  # what `ssdpc reconstruct --config run.yaml` reads
+    rec = cfg.reconstruction
+    assert (rec.z_min_um, rec.z_max_um, rec.dz_um) == (Z[0], Z[1], DZ)
+    assert (rec.sign, rec.tv_iterations, rec.rl_iterations) == ("lighter", 25, 7)
+    assert cfg.optics.condenser_na == optics.condenser_na == 0.3
+
+    w["operators"].z_min.value, w["operators"].sign.value, w["reconstruct"].iterations.value = -40.0, "any", 3
+    assert dock.load_settings(path)
+    assert (w["operators"].z_min.value, w["operators"].sign.value, w["reconstruct"].iterations.value) == (
+        Z[0],
+        "lighter",
+        7,
+    )
+    assert not dock.load_settings(tmp_path / "missing.yaml") and "missing.yaml" in shown[-1]
+    shown.clear()
+
+    w["reconstruct"].run()
+    _steps.wait_for(qtbot, w["reconstruct"])
+    assert shown == []
+    ri = viewer.layers["PMMA bead (raw light field) RI"]
+    assert ri.data.shape[0] == 11 and ri.metadata["ssdpc"]["settings"]["tv_sign"] == "lighter"
+    # the run was remembered: a new dock in a new viewer starts from it
+    assert RunConfig.from_yaml(_session.remembered_settings_path()).reconstruction.tv_iterations == 25

@@ -17,10 +17,11 @@ from pathlib import Path
 
 import numpy as np
 from magicgui.widgets import ComboBox, Container, FileEdit, Label, PushButton
-from qtpy.QtWidgets import QVBoxLayout, QWidget
+from qtpy.QtWidgets import QScrollArea, QVBoxLayout, QWidget
 from scipy import ndimage
 
 from napari_ssdpc._napari import notify
+from napari_ssdpc._napari.widgets.common import MIN_DOCK_HEIGHT_PX
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.frames import atomic_write
 
@@ -107,11 +108,19 @@ class ProfileWidget(QWidget):
         )
         self.figure = Figure(figsize=(4, 3), tight_layout=True)
         self.canvas = FigureCanvasQTAgg(self.figure)
-        self.canvas.setMinimumHeight(260)
+        self.canvas.setMinimumHeight(220)
         self.axes = self.figure.add_subplot(1, 1, 1)
+        inner = QWidget()
+        column = QVBoxLayout(inner)
+        column.addWidget(self.controls.native)
+        column.addWidget(self.canvas)
+        area = QScrollArea()  # the dock may be short (a laptop screen, other docks open): scroll
+        area.setWidgetResizable(True)
+        area.setWidget(inner)
+        area.setMinimumHeight(MIN_DOCK_HEIGHT_PX)
         layout = QVBoxLayout(self)
-        layout.addWidget(self.controls.native)
-        layout.addWidget(self.canvas)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.addWidget(area)
         self.profiles: list[dict] = []
         self._connected = []
         ev = napari_viewer.layers.events
@@ -131,6 +140,7 @@ class ProfileWidget(QWidget):
             lyr for lyr in reversed(self.viewer.layers) if lyr._type_string == "image" and lyr.ndim >= 2 and not lyr.rgb
         ]
         results = [lyr for lyr in layers if lyr.metadata.get("ssdpc", {}).get("kind") == "result"]
+        results.sort(key=lambda lyr: lyr.metadata["ssdpc"].get("quantity") != "ri")  # RI first, then the rest
         return [(lyr.name, lyr) for lyr in results + [lyr for lyr in layers if lyr not in results]]
 
     def _shapes(self, _w=None):

@@ -14,26 +14,15 @@ from pathlib import Path
 import numpy as np
 
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.reconstruction.outputs import QUANTITIES, display
 
 RESULT_FORMAT = "napari-ssdpc-result"
 RESULT_VERSION = 1
 MIN_FRAME_PX = 32  # smaller images are not light-field frames
 MAX_JSON_BYTES = 50_000_000
 
-# quantity -> (layer name suffix, colormap, unit, centred on the medium / zero)
-QUANTITIES = {
-    "ri": ("RI", "RdBu_r", "refractive index", True),
-    "delta_n": ("Δn", "RdBu_r", "refractive-index difference", True),
-    "phase": ("phase", "RdBu_r", "rad per slice", True),
-    "absorption": ("absorption", "gray", "absorption per slice", True),
-    "dpc_ud": ("DPC up-down", "gray", "DPC ratio", True),
-    "dpc_lr": ("DPC left-right", "gray", "DPC ratio", True),
-    "stack_up": ("stack up", "gray", "intensity", False),
-    "stack_down": ("stack down", "gray", "intensity", False),
-    "stack_left": ("stack left", "gray", "intensity", False),
-    "stack_right": ("stack right", "gray", "intensity", False),
-    "psf": ("PSF", "magma", "fraction of one lenslet's light per pixel", False),
-}
+#: Display of a lenslet's PSF stack (Operators widget): not a reconstruction output.
+PSF_STYLE = ("PSF", "magma", "fraction of one lenslet's light per pixel", False)
 
 
 def _stem(p: Path) -> str:
@@ -204,7 +193,7 @@ def calibration_layers(cal, name: str) -> list:
 # ``napari_ssdpc`` attribute of an OME-Zarr image group. The writer of this plugin and the
 # ``ssdpc reconstruct`` command both write ``software: "napari-ssdpc <version>"``; an OME-Zarr
 # store holds one image group per quantity ("ri", "phase", "dpc", ...).
-CHANNELS = {"dpc": ["dpc_ud", "dpc_lr"], "stacks": ["stack_up", "stack_down", "stack_left", "stack_right"]}
+CHANNELS = {q.name: list(q.channel_keys()) for q in QUANTITIES.values() if q.kind == "channels"}
 _WORDS = [
     ("difference", "delta_n"),
     ("refractive", "ri"),
@@ -284,12 +273,12 @@ def read_result(path):
         pixels = tifffile.xml2dict(tif.ome_metadata)["OME"]["Image"]["Pixels"]
     data = open_lazy(p, squeeze=False)
     axes = axes.replace("Q", "").replace("I", "T")
-    if "Z" not in axes and axes.endswith("YX"):  # a single plane (--z 5 5): tifffile drops Z
-        data, axes = data[..., np.newaxis, :, :], axes[:-2] + "ZYX"
     voxel = tuple(float(pixels.get(f"PhysicalSize{a}", 1.0)) for a in "ZYX")
     stem = _stem(p)
     hint = stem.rsplit("_", 1)[-1] if "_" in stem else ""
     q = quantity_key(desc, hint)
+    if "Z" not in axes and axes.endswith("YX") and not _is_map(q):  # one plane (--z 5 5): tifffile drops Z
+        data, axes = data[..., np.newaxis, :, :], axes[:-2] + "ZYX"
     if q == hint or (hint == "n" and q == "delta_n"):  # OUT_phase.ome.tif, OUT_delta_n.ome.tif
         stem = stem[: -len(q) - 1]
     desc = {"name": stem, **desc, "quantity": q}
@@ -347,17 +336,51 @@ def _result_layers(data, axes: str, desc: dict, voxel):
             _result_layers(data[(slice(None),) * i + (k,)], rest, {**desc, "quantity": name}, voxel)[0]
             for k, name in enumerate(names)
         ]
-    origin = _origin(desc, data.shape[-3:], voxel)
+    shape = (1, *data.shape[-2:]) if _is_map(desc.get("quantity", "ri")) else data.shape[-3:]
+    origin = _origin(desc, shape, voxel)
     return [result_layer(data, desc.get("quantity", "ri"), voxel, origin, name=desc.get("name", "volume"), info=desc)]
 
 
+def _is_map(key: str) -> bool:
+    """A 2D quantity (projected phase, OPD, dry mass): (y, x) per frame."""
+    q, _ = display(key)
+    return q is not None and q.kind == "map"
+
+
 def result_layer(data, quantity: str, voxel_um, origin_um, *, name: str, info: dict | None = None):
-    """Layer data tuple of a (z, y, x) or (t, z, y, x) result: scale in µm, axis labels, units,
-    colormap and contrast limits (centred on the medium index for RI, on 0 for signed maps),
-    3D rendering that shows the dominant sign, and ``metadata['ssdpc']`` with the settings."""
+    """Layer data tuple of a result, styled from the registry of output quantities.
+
+    Parameters
+    ----------
+    data : array_like
+        (z, y, x) volume or (y, x) map, or a series of them with a leading t axis.
+    quantity : str
+        Registry key or channel key ('ri', 'opd_nm', 'dpc_ud', ...), or 'psf'.
+    voxel_um, origin_um : sequence of float
+        (z, y, x) voxel size and position of voxel 0, µm (a map uses the last two).
+    name : str
+        Layer name stem; the quantity's label is appended.
+    info : dict, optional
+        Metadata kept under ``metadata['ssdpc']`` (settings, optics, source).
+
+    Returns
+    -------
+    tuple
+        napari's (data, kwargs, 'image'): scale in µm, axis labels, units, colormap, contrast
+        limits centred on the medium index (RI) or on 0 for signed quantities, and a 3D rendering
+        that shows the dominant sign.
+    """
     info = dict(info or {})
-    suffix, cmap, unit, centred = QUANTITIES.get(quantity, (quantity, "gray", "", False))
-    time = data.ndim == 4
+    q, suffix = display(quantity)
+    suffix, cmap, unit, centred = (
+        PSF_STYLE
+        if quantity == "psf"
+        else (suffix, "gray", "", False)
+        if q is None
+        else (suffix, q.colormap, q.unit or q.description, q.centred)
+    )
+    spatial = 2 if _is_map(quantity) else 3  # a 2D map (OPD, dry mass) or a volume
+    time = data.ndim == spatial + 1
     first = np.asarray(data[0] if time else data, np.float32)
     centre = 0.0
     if quantity == "ri":
@@ -372,15 +395,15 @@ def result_layer(data, quantity: str, voxel_um, origin_um, *, name: str, info: d
     else:
         lo, hi = (float(v) for v in np.percentile(first, [0.1, 99.9]))
         lims = [lo, hi if hi > lo else lo + 1e-6]
-    voxel = tuple(float(v) for v in voxel_um)
-    origin = tuple(float(v) for v in origin_um)
+    voxel = tuple(float(v) for v in voxel_um)[-spatial:]
+    origin = tuple(float(v) for v in origin_um)[-spatial:]
     info.update(kind="result", quantity=quantity, unit=unit, voxel_um=list(voxel), origin_um=list(origin))
     kwargs = {
         "name": name if name.endswith(suffix) else f"{name} {suffix}",
         "scale": ((1.0,) if time else ()) + voxel,
         "translate": ((0.0,) if time else ()) + origin,
-        "axis_labels": (("t",) if time else ()) + ("z", "y", "x"),
-        "units": (("pixel",) if time else ()) + ("µm", "µm", "µm"),
+        "axis_labels": (("t",) if time else ()) + ("z", "y", "x")[-spatial:],
+        "units": (("pixel",) if time else ()) + ("µm",) * spatial,
         "colormap": cmap,
         "contrast_limits": lims,
         "rendering": rendering,

@@ -17,7 +17,7 @@ import numpy as np
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.settings.lenslets import HALVES, PAIRS
 
-__all__ = ["QUANTITIES", "SAVE_CHOICES", "Quantity", "images", "layout", "parse_save"]
+__all__ = ["CHANNEL_LABELS", "QUANTITIES", "SAVE_CHOICES", "Quantity", "display", "images", "layout", "parse_save"]
 
 
 @dataclass(frozen=True)
@@ -70,6 +70,12 @@ class Quantity:
                 return None
             return np.stack([value[c] for c in self.channels])
         return None if value is None else np.asarray(value)
+
+    def channel_keys(self) -> tuple[str, ...]:
+        """Keys of a 'channels' quantity's channels ('dpc_ud', 'stack_up', ...); else ``(name,)``."""
+        if self.kind != "channels":
+            return (self.name,)
+        return tuple(f"{self.label.lower()}_{c}" for c in self.channels)
 
     def file_suffix(self) -> str:
         """'' for the main output (RI), else '_<name>'."""
@@ -149,6 +155,8 @@ QUANTITIES: dict[str, Quantity] = {
         ),
     )
 }
+#: Display names of the channels of DPC (paper Eq. 1) and of the stacks (paper Eq. 5).
+CHANNEL_LABELS = {"ud": "up-down", "lr": "left-right", **{h: h for h in HALVES}}
 #: What ``--save`` may add to the RI volume, in a fixed order.
 SAVE_CHOICES = tuple(n for n in QUANTITIES if n != "ri")
 
@@ -189,3 +197,28 @@ def layout(n_z: int, shape_yx: tuple[int, int], save: Iterable[str]) -> dict[str
         shape = {"volume": (n_z, *shape_yx), "map": tuple(shape_yx), "channels": (len(q.channels), n_z, *shape_yx)}
         out[name] = (shape[q.kind], q.axes, q.description)
     return out
+
+
+def display(key: str) -> tuple[Quantity | None, str]:
+    """The quantity behind a layer key and the key's display label.
+
+    Parameters
+    ----------
+    key : str
+        A quantity name ('ri', 'opd_nm', ...) or one channel of a 'channels' quantity
+        ('dpc_ud', 'stack_left').
+
+    Returns
+    -------
+    quantity : Quantity or None
+        None for a key that is not in the registry.
+    label : str
+        Short display name: the quantity's label, with the channel ('DPC up-down', 'stack left').
+    """
+    if key in QUANTITIES:
+        return QUANTITIES[key], QUANTITIES[key].label
+    for q in QUANTITIES.values():
+        for c, k in zip(q.channels, q.channel_keys()):
+            if k == key:
+                return q, f"{q.label} {CHANNEL_LABELS.get(c, c)}"
+    return None, key

@@ -7,7 +7,15 @@ from magicgui.widgets import ComboBox, Container, FileEdit, Label, PushButton
 
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.reader import calibration_layers
-from napari_ssdpc._napari.widgets.common import follow_layers, frame_index, image_layer_choices, run_buttons, show_layer
+from napari_ssdpc._napari.widgets.common import (
+    compact,
+    follow_layers,
+    frame_index,
+    image_layer_choices,
+    run_buttons,
+    show_layer,
+    wrap,
+)
 from napari_ssdpc._napari.widgets.jobs import JobRunner
 from napari_ssdpc._napari.widgets.session import session_for
 from napari_ssdpc.errors import SsdpcError
@@ -19,7 +27,8 @@ class CalibrateWidget(Container):
     """Detect the lenslet grid on an image layer; adds EI circles and centres layers."""
 
     def __init__(self, napari_viewer):
-        super().__init__(labels=True)
+        super().__init__(labels=True, scrollable=True)
+        compact(self)
         self.viewer = napari_viewer
         self.session = session_for(napari_viewer)
         self.image = ComboBox(
@@ -38,7 +47,7 @@ class CalibrateWidget(Container):
         self.run_button, self.cancel_button, self.status = run_buttons(
             "Calibrate", "find the lattice and the optical axis"
         )
-        self.result = Label(value="")
+        self.result = wrap(Label(value=""))
         self.result.tooltip = "optical axis position (px), lenslet pitch (px), MLA rotation (degrees)"
         self.path = FileEdit(mode="w", filter="*.json")
         self.path.label = "save as"

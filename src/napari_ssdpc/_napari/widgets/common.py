@@ -11,7 +11,12 @@ from magicgui.widgets import Container, Label, PushButton
 from napari_ssdpc._napari import notify
 from napari_ssdpc.errors import SsdpcWarning
 
+#: Smallest height of a dock's scrolling content: with every dock open, the window fits 1280 x 800.
+MIN_DOCK_HEIGHT_PX = 80
+
 __all__ = [
+    "MIN_DOCK_HEIGHT_PX",
+    "compact",
     "calibration_layer_choices",
     "catching_warnings",
     "follow_layers",
@@ -19,6 +24,7 @@ __all__ = [
     "image_layer_choices",
     "run_buttons",
     "show_layer",
+    "wrap",
 ]
 
 
@@ -115,4 +121,39 @@ def run_buttons(run_text: str, run_tip: str):
     run = PushButton(text=run_text, tooltip=run_tip)
     cancel = PushButton(text="Cancel", tooltip="stop the running job within one iteration")
     status = Label(value="")
+    wrap(status)
     return run, cancel, status
+
+
+def wrap(label: Label) -> Label:
+    """Let a label's text wrap, so a long message never widens its dock.
+
+    Parameters
+    ----------
+    label : magicgui Label
+
+    Returns
+    -------
+    Label
+        The same label.
+    """
+    label.native.setWordWrap(True)
+    return label
+
+
+def compact(container: Container) -> Container:
+    """Let a scrollable container shrink to :data:`MIN_DOCK_HEIGHT_PX` (it scrolls instead of
+    making the window taller).
+
+    Parameters
+    ----------
+    container : magicgui Container
+        Made with ``scrollable=True``.
+
+    Returns
+    -------
+    Container
+        The same container.
+    """
+    container.native.setMinimumHeight(MIN_DOCK_HEIGHT_PX)
+    return container

@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
-import weakref
-
 import numpy as np
 from magicgui.widgets import CheckBox, ComboBox, Container, FloatSpinBox, PushButton, SpinBox
 
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.reader import result_layer
-from napari_ssdpc._napari.widgets.common import calibration_layer_choices, follow_layers, run_buttons, show_layer
+from napari_ssdpc._napari.widgets.common import (
+    calibration_layer_choices,
+    compact,
+    follow_layers,
+    run_buttons,
+    show_layer,
+)
 from napari_ssdpc._napari.widgets.jobs import JobRunner
 from napari_ssdpc._napari.widgets.session import build_reconstructor, calibration_of, session_for
 from napari_ssdpc.errors import SsdpcError
@@ -23,10 +27,12 @@ class OperatorsWidget(Container):
     """z range, dz and model; builds the PSFs and transfer functions once (a Reconstructor)."""
 
     def __init__(self, napari_viewer):
-        super().__init__(labels=True)
+        super().__init__(labels=True, scrollable=True)
+        compact(self)
         self.viewer = napari_viewer
         self.session = session_for(napari_viewer)
-        self.session.operators_widget = weakref.ref(self)
+        self.session.use("operators_widget", self)
+        self.changed.connect(lambda *_: self.session.use("operators_widget", self))  # the one edited last counts
         rec = ReconstructionSettings().to_dict()
         self.calibration = ComboBox(
             label="calibration",
@@ -132,6 +138,7 @@ class OperatorsWidget(Container):
         self.run_button.changed.connect(self.run)
         self.psf_button.changed.connect(self.show_psf)
         self.session.optics_loaded.connect(self._defaults)
+        self.session.settings_loaded.connect(self.show_settings)
         self.session.optics_changed.connect(self._stale)
         self.session.operators_built.connect(self._refresh_lenslets)
         follow_layers(napari_viewer, self)
@@ -140,6 +147,13 @@ class OperatorsWidget(Container):
         rec = ReconstructionSettings().to_dict()
         self.z_min.value, self.z_max.value, self.dz.value = rec["z_min_um"], rec["z_max_um"], rec["dz_um"]
         self.model.value, self.method.value = rec["model"], rec["method"]
+
+    def show_settings(self, rec: ReconstructionSettings) -> None:
+        """Show loaded reconstruction settings (z grid, model, method, the 'tv' parameters)."""
+        self.z_min.value, self.z_max.value, self.dz.value = rec.z_min_um, rec.z_max_um, rec.dz_um
+        self.model.value, self.method.value, self.sign.value = rec.model, rec.method, rec.sign
+        self.tv_lambda.value = rec.tv_lambda or 0.0
+        self.tv_iterations.value = rec.tv_iterations
 
     def _stale(self, _optics):
         if self.session.built is not None and not self.runner.running:
@@ -173,6 +187,7 @@ class OperatorsWidget(Container):
     def run(self, *_):
         try:
             spec = self.session.spec()
+            self.session.remember()
         except SsdpcError as e:
             notify.error(e)
             return None

@@ -7,7 +7,7 @@ import textwrap
 from magicgui.widgets import CheckBox, Container, FileEdit, FloatSpinBox, Label, LineEdit, PushButton, SpinBox
 
 from napari_ssdpc._napari import notify
-from napari_ssdpc._napari.widgets.common import catching_warnings
+from napari_ssdpc._napari.widgets.common import catching_warnings, compact, wrap
 from napari_ssdpc._napari.widgets.session import session_for
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.design import design
@@ -80,6 +80,7 @@ class OpticsWidget(Container):
 
     def __init__(self, napari_viewer):
         super().__init__(labels=True, scrollable=True)
+        compact(self)
         self.viewer = napari_viewer
         self.session = session_for(napari_viewer)
         self.fields = {}
@@ -101,7 +102,7 @@ class OpticsWidget(Container):
         self.layer_button = PushButton(
             text="From selected layer", tooltip="adopt the optics stored with the selected layer (sample data)"
         )
-        self.design = Label(value="")
+        self.design = wrap(Label(value=""))
         self.design.tooltip = "design numbers of paper Eqs. 8-14 (µm)"
         self.extend(
             [

@@ -2,38 +2,53 @@
 
 from __future__ import annotations
 
-import weakref
-
 import numpy as np
 from magicgui.widgets import CheckBox, ComboBox, Container, FloatSpinBox, SpinBox
 
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.reader import result_layer
-from napari_ssdpc._napari.widgets.common import follow_layers, frame_index, image_layer_choices, run_buttons, show_layer
+from napari_ssdpc._napari.widgets.common import (
+    compact,
+    follow_layers,
+    frame_index,
+    image_layer_choices,
+    run_buttons,
+    show_layer,
+)
 from napari_ssdpc._napari.widgets.jobs import JobRunner
 from napari_ssdpc._napari.widgets.session import build_reconstructor, session_for
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.reconstruction.outputs import QUANTITIES
 from napari_ssdpc.settings.reconstruction import ReconstructionSettings
 
-__all__ = ["OUTPUTS", "ReconstructWidget", "result_arrays"]
+__all__ = ["ReconstructWidget", "result_arrays"]
 
 
-OUTPUTS = {  # checkbox attribute -> (label, quantities)
-    "out_delta_n": ("Δn", ("delta_n",)),
-    "out_phase": ("phase", ("phase",)),
-    "out_absorption": ("absorption", ("absorption",)),
-    "out_dpc": ("DPC", ("dpc_ud", "dpc_lr")),
-    "out_stacks": ("directional stacks", ("stack_up", "stack_down", "stack_left", "stack_right")),
-}
+def result_arrays(res, wanted) -> dict:
+    """The wanted quantities of a core Result, channels split ('dpc_ud', 'stack_up', ...).
 
+    Parameters
+    ----------
+    res : Result
+        One reconstructed frame.
+    wanted : iterable of str
+        Registry names ('ri', 'opd_nm', 'dpc', ...).
 
-def result_arrays(res) -> dict:
-    """Every quantity of a core Result as (z, y, x) float32 arrays (missing ones left out)."""
-    out = {"ri": res.ri, "delta_n": res.delta_n, "phase": res.phase}
-    if res.absorption is not None:
-        out["absorption"] = res.absorption
-    out.update({f"dpc_{k}": v for k, v in (res.dpc or {}).items()})
-    out.update({f"stack_{k}": v for k, v in (res.stacks or {}).items()})
+    Returns
+    -------
+    dict
+        {layer key: (z, y, x) volume or (y, x) map}; quantities the result does not hold are left out.
+    """
+    out = {}
+    for name in wanted:
+        q = QUANTITIES[name]
+        value = q.get(res)
+        if value is None or (q.kind == "channels" and not value):
+            continue
+        if q.kind == "channels":
+            out.update({k: np.asarray(value[c]) for c, k in zip(q.channels, q.channel_keys())})
+        else:
+            out[name] = np.asarray(value)
     return out
 
 
@@ -41,10 +56,12 @@ class ReconstructWidget(Container):
     """Reconstruct the current frame, or every frame of a (t, y, x) series, into RI layers."""
 
     def __init__(self, napari_viewer):
-        super().__init__(labels=True)
+        super().__init__(labels=True, scrollable=True)
+        compact(self)
         self.viewer = napari_viewer
         self.session = session_for(napari_viewer)
-        self.session.reconstruct_widget = weakref.ref(self)
+        self.session.use("reconstruct_widget", self)
+        self.changed.connect(lambda *_: self.session.use("reconstruct_widget", self))  # the one edited last counts
         rec = ReconstructionSettings().to_dict()
         self.raw = ComboBox(
             label="raw frame(s)",
@@ -80,12 +97,17 @@ class ReconstructWidget(Container):
             tooltip="for a (t, y, x) series: only the frame on the time slider, or every frame "
             "into a (t, z, y, x) layer",
         )
-        for attr, (label, _) in OUTPUTS.items():
-            setattr(
-                self,
-                attr,
-                CheckBox(text=f"add {label}", value=False, tooltip=f"also add the {label} layer(s) (µm scale)"),
+        self.outputs = {  # one checkbox per quantity of the registry beside RI
+            name: CheckBox(
+                text=f"add {q.label}" + (" (RL stacks)" if q.needs_stacks else ""),
+                value=False,
+                tooltip=f"also add {q.description} ({'2D map' if q.kind == 'map' else 'volume'}, µm scale)",
             )
+            for name, q in QUANTITIES.items()
+            if name != "ri"
+        }
+        for name, box in self.outputs.items():
+            setattr(self, f"out_{name}", box)
         self.run_button, self.cancel_button, self.status = run_buttons("Reconstruct", "RI volume of the frame(s)")
         self.extend(
             [
@@ -94,7 +116,7 @@ class ReconstructWidget(Container):
                 self.iterations,
                 self.alpha,
                 self.frames,
-                *(getattr(self, a) for a in OUTPUTS),
+                *self.outputs.values(),
                 self.run_button,
                 self.cancel_button,
                 self.status,
@@ -103,6 +125,7 @@ class ReconstructWidget(Container):
         self.runner = JobRunner("Reconstruct", self.run_button, self.cancel_button, self.status)
         self.run_button.changed.connect(self.run)
         self.session.optics_loaded.connect(self._defaults)
+        self.session.settings_loaded.connect(self.show_settings)
         follow_layers(napari_viewer, self)
 
     def _defaults(self, optics):
@@ -110,16 +133,22 @@ class ReconstructWidget(Container):
         self.iterations.value = int(rec["rl_iterations"])
         self.alpha.value = float(rec["tikhonov_alpha"] or 0.0)
 
+    def show_settings(self, rec: ReconstructionSettings) -> None:
+        """Show loaded reconstruction settings (RL iterations, Tikhonov α; 0 = the default)."""
+        self.iterations.value = rec.rl_iterations
+        self.alpha.value = rec.tikhonov_alpha or 0.0
+
+    def run_settings(self) -> dict:
+        """Settings of this widget that the operators do not depend on."""
+        return {"rl_iterations": int(self.iterations.value)}
+
     def operator_settings(self) -> dict:
         flat = self.flat.value
         return {"flat": None if flat is None else flat.data, "alpha": float(self.alpha.value) or None}
 
     def quantities(self) -> list[str]:
-        out = ["ri"]
-        for attr, (_, qs) in OUTPUTS.items():
-            if getattr(self, attr).value:
-                out += list(qs)
-        return out
+        """Registry names to show: RI and every ticked output."""
+        return ["ri"] + [name for name, box in self.outputs.items() if box.value]
 
     def run(self, *_):
         layer = self.raw.value
@@ -128,11 +157,12 @@ class ReconstructWidget(Container):
             return None
         try:
             spec = self.session.spec()
+            self.session.remember()
         except SsdpcError as e:
             notify.error(e)
             return None
         wanted = self.quantities()
-        needs_rl = [q for q in wanted if q.startswith(("dpc", "stack")) or q == "absorption"]
+        needs_rl = [q for q in wanted if QUANTITIES[q].needs_stacks]
         if needs_rl and not spec["stacks"] and spec["method"] != "rl":
             notify.error(f"{needs_rl[0]} needs the directional stacks: tick 'directional stacks' in Operators")
             return None
@@ -157,10 +187,8 @@ class ReconstructWidget(Container):
                     progress=lambda d, n, lab: progress(d, n, prefix + lab),  # noqa: B023
                     should_stop=should_stop,
                 )
-                arrays = result_arrays(res)
-                for q in wanted:
-                    if q in arrays:
-                        collected.setdefault(q, []).append(arrays[q])
+                for q, a in result_arrays(res, wanted).items():
+                    collected.setdefault(q, []).append(a)
             out = {q: (np.stack(v) if series else v[0]) for q, v in collected.items()}
             return rec, out, res
 

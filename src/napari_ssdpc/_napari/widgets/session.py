@@ -6,16 +6,27 @@ session is keyed on the real viewer behind it, so all widgets (and the ssDPC doc
 
 from __future__ import annotations
 
+import os
 import weakref
+from pathlib import Path
 
 import numpy as np
 from psygnal import Signal
 
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.settings.config import RunConfig
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.settings.reconstruction import ReconstructionSettings
 
-__all__ = ["Session", "build_reconstructor", "calibration_of", "real_viewer", "session_for"]
+__all__ = [
+    "TV_KEYS",
+    "Session",
+    "build_reconstructor",
+    "calibration_of",
+    "real_viewer",
+    "remembered_settings_path",
+    "session_for",
+]
 
 
 class Session:
@@ -23,13 +34,27 @@ class Session:
 
     optics_changed = Signal(object)  # any edit of the optics
     optics_loaded = Signal(object)  # a new optics file/preset: widgets reset their defaults
+    settings_loaded = Signal(object)  # a settings file: widgets show its ReconstructionSettings
     operators_built = Signal(object)
 
     def __init__(self):
         self.optics = Optics.paper()
+        self.base = ReconstructionSettings()  # what no widget shows (dn_max, device, ...) and the defaults
         self.built = None  # (spec, Reconstructor)
         self.operators_widget = None  # weak references, set by the widgets
         self.reconstruct_widget = None
+
+    def use(self, role: str, widget) -> None:
+        """Make ``widget`` the one whose values count for ``role`` ('operators_widget' or
+        'reconstruct_widget'): the newest, or the one edited last when the dock and a separate
+        widget of the same kind are both open.
+
+        Parameters
+        ----------
+        role : str
+        widget : OperatorsWidget or ReconstructWidget
+        """
+        setattr(self, role, weakref.ref(widget))
 
     def set_optics(self, optics: Optics, loaded: bool = False):
         self.optics = optics
@@ -40,7 +65,7 @@ class Session:
     def spec(self) -> dict:
         """Everything a Reconstructor is built from: the Operators widget's z range, dz, model,
         method and calibration, and the Reconstruct widget's flat frame and α."""
-        rec = ReconstructionSettings().to_dict()
+        rec = self.base.to_dict()
         spec = {
             "optics": self.optics,
             "calibration": None,
@@ -50,14 +75,65 @@ class Session:
             "method": rec["method"],
             "stacks": False,  # RL stacks only when DPC, stacks, absorption or the PSF are asked for
             "alpha": rec["tikhonov_alpha"],
-            "tv": {k: rec[k] for k in ("sign", "tv_lambda", "tv_iterations")},
+            "tv": {k: rec[k] for k in TV_KEYS},
             "flat": None,
         }
-        for ref in (self.operators_widget, self.reconstruct_widget):
-            w = ref() if ref is not None else None
-            if w is not None:
-                spec.update(w.operator_settings())
+        for w in self._widgets():
+            given = w.operator_settings()
+            spec.update({**given, "tv": {**spec["tv"], **given.get("tv", {})}})
         return spec
+
+    def _widgets(self):
+        refs = (self.operators_widget, self.reconstruct_widget)
+        return [w for w in (r() if r is not None else None for r in refs) if w is not None]
+
+    def settings(self) -> ReconstructionSettings:
+        """The reconstruction settings the widgets show now, as the CLI reads them.
+
+        Returns
+        -------
+        ReconstructionSettings
+            z range, method and its parameters from the widgets; the rest from the last loaded file.
+        """
+        spec = self.spec()
+        values = {
+            **self.base.to_dict(),
+            **spec["tv"],
+            "z_min_um": spec["z"][0],
+            "z_max_um": spec["z"][1],
+            "dz_um": spec["dz"],
+            "method": spec["method"],
+            "model": spec["model"],
+            "tikhonov_alpha": spec["alpha"],
+        }
+        for w in self._widgets():
+            values.update(getattr(w, "run_settings", dict)())
+        return ReconstructionSettings.from_dict(values, source="the dock's settings")
+
+    def run_config(self) -> RunConfig:
+        """The optics and the reconstruction settings: what ``ssdpc reconstruct --config`` reads."""
+        return RunConfig(optics=self.optics, reconstruction=self.settings())
+
+    def load_config(self, config: RunConfig) -> None:
+        """Show a run configuration in every widget (optics first, then the settings).
+
+        Parameters
+        ----------
+        config : RunConfig
+            As read by :meth:`RunConfig.from_yaml`.
+        """
+        self.base = config.reconstruction
+        self.set_optics(config.optics, loaded=True)
+        self.settings_loaded.emit(config.reconstruction)
+
+    def remember(self) -> None:
+        """Keep the settings for the next napari session (a failed write is not an error)."""
+        path = remembered_settings_path()
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            self.run_config().to_yaml(path)
+        except (SsdpcError, OSError):
+            pass
 
     def matching(self, spec):
         """The built Reconstructor if it was made from exactly ``spec``, else None."""
@@ -66,6 +142,16 @@ class Session:
         old, rec = self.built
         same = all((old[k] is spec[k]) if k in ("optics", "calibration", "flat") else old[k] == spec[k] for k in spec)
         return rec if same else None
+
+
+#: Settings a widget hands to the 'tv' solver (a subset of ReconstructionSettings).
+TV_KEYS = ("sign", "tv_lambda", "tv_iterations", "dn_max", "refraction_increment_um3_pg")
+
+
+def remembered_settings_path() -> Path:
+    """Where the dock keeps the last settings: ``$NAPARI_SSDPC_CONFIG`` or ~/.config/napari-ssdpc."""
+    root = os.environ.get("NAPARI_SSDPC_CONFIG") or Path.home() / ".config" / "napari-ssdpc"
+    return Path(root) / "last-settings.yaml"
 
 
 _SESSIONS: dict[int, tuple] = {}

@@ -1,0 +1,177 @@
+"""The ssDPC dock: the whole workflow in one dock, as tabs (optics, calibrate, method, reconstruct,
+profile), with the settings file the command line reads.
+
+Each tab holds one of the widgets that can also be opened on its own; all of them share the
+viewer's :class:`~napari_ssdpc._napari.widgets.session.Session`, so the dock and any separate
+widget always agree. The tabs scroll, so the dock fits a laptop screen (1280 x 800) whatever the
+tab's length. The settings of the last run are remembered for the next napari session.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from qtpy.QtWidgets import QFileDialog, QHBoxLayout, QPushButton, QScrollArea, QTabWidget, QVBoxLayout, QWidget
+
+from napari_ssdpc._napari import notify
+from napari_ssdpc._napari.profiles import ProfileWidget
+from napari_ssdpc._napari.widgets.calibrate import CalibrateWidget
+from napari_ssdpc._napari.widgets.common import MIN_DOCK_HEIGHT_PX
+from napari_ssdpc._napari.widgets.operators import OperatorsWidget
+from napari_ssdpc._napari.widgets.optics import OpticsWidget
+from napari_ssdpc._napari.widgets.reconstruct import ReconstructWidget
+from napari_ssdpc._napari.widgets.session import remembered_settings_path, session_for
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.settings.config import RunConfig
+
+__all__ = ["DOCK_WIDTH_PX", "SsdpcDock"]
+
+#: Width the dock asks for: room for a label and a spin box, the rest of a laptop screen for the canvas.
+DOCK_WIDTH_PX = 360
+#: The dock's tabs: (title, widget class).
+TABS = (
+    ("Optics", OpticsWidget),
+    ("Calibrate", CalibrateWidget),
+    ("Method", OperatorsWidget),
+    ("Reconstruct", ReconstructWidget),
+    ("Profile", ProfileWidget),
+)
+
+
+def _scrolling(widget: QWidget) -> QScrollArea:
+    area = QScrollArea()
+    area.setWidgetResizable(True)
+    area.setWidget(widget)
+    area.setMinimumHeight(MIN_DOCK_HEIGHT_PX)
+    return area
+
+
+class SsdpcDock(QWidget):
+    """One dock for the workflow: optics → calibrate → method → reconstruct → profile.
+
+    Parameters
+    ----------
+    napari_viewer : napari.Viewer
+        The viewer (or napari's proxy of it); the dock uses the viewer's shared session.
+
+    Attributes
+    ----------
+    tabs : dict
+        {title: widget} of the workflow steps ("Optics", "Calibrate", ...).
+    """
+
+    def __init__(self, napari_viewer):
+        super().__init__()
+        self.viewer = napari_viewer
+        self.session = session_for(napari_viewer)
+        self.tabs = {title: cls(napari_viewer) for title, cls in TABS}
+        self.tab_widget = QTabWidget()
+        self.tab_widget.setUsesScrollButtons(True)
+        for title, w in self.tabs.items():  # the magicgui steps scroll themselves
+            self.tab_widget.addTab(w.native if hasattr(w, "native") else _scrolling(w), title)
+        buttons = QHBoxLayout()
+        for text, tip, slot in (
+            ("Open raw…", "open a raw light-field frame or (t, y, x) series (TIFF)", self._open_raw_dialog),
+            ("Load settings…", "read optics and reconstruction settings (ssdpc --config YAML)", self._load_dialog),
+            (
+                "Save settings…",
+                "write optics and reconstruction settings for ssdpc reconstruct --config",
+                self._save_dialog,
+            ),
+        ):
+            b = QPushButton(text)
+            b.setToolTip(tip)
+            b.clicked.connect(slot)
+            buttons.addWidget(b)
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(2, 2, 2, 2)
+        layout.addLayout(buttons)
+        layout.addWidget(self.tab_widget)
+        self.setMinimumWidth(DOCK_WIDTH_PX)
+        self._restore()
+
+    # ------------------------------------------------------------------ settings
+    def save_settings(self, path) -> Path | None:
+        """Write the optics and reconstruction settings as a run configuration YAML.
+
+        Parameters
+        ----------
+        path : str or Path
+            The YAML file (``ssdpc reconstruct --config`` reads it).
+
+        Returns
+        -------
+        Path or None
+            The file written; None when the settings are invalid or the file cannot be written
+            (the message is shown).
+        """
+        try:
+            return self.session.run_config().to_yaml(path)
+        except SsdpcError as e:
+            notify.error(e)
+        except OSError as e:
+            notify.error(f"could not write {path}: {e.strerror}; choose a writable folder")
+        return None
+
+    def load_settings(self, path) -> bool:
+        """Read a run configuration (or an optics YAML) into every widget.
+
+        Parameters
+        ----------
+        path : str or Path
+
+        Returns
+        -------
+        bool
+            Whether it was read (otherwise the one-line reason is shown).
+        """
+        try:
+            self.session.load_config(RunConfig.from_yaml(path))
+        except SsdpcError as e:
+            notify.error(e)
+            return False
+        return True
+
+    def open_raw(self, path) -> list:
+        """Add a raw frame or series with this plugin's reader (whatever the file's name).
+
+        Parameters
+        ----------
+        path : str or Path
+            A TIFF or OME-TIFF light-field frame (y, x) or series (t, y, x).
+
+        Returns
+        -------
+        list of napari layers
+        """
+        from napari_ssdpc._napari.reader import get_raw_reader
+
+        reader = get_raw_reader(str(path))
+        if reader is None:
+            notify.error(f"{path}: not a light-field frame (a 2D or (t, y, x) grey-level TIFF); choose another file")
+            return []
+        return [getattr(self.viewer, f"add_{kind}")(data, **kwargs) for data, kwargs, kind in reader(str(path))]
+
+    def _restore(self) -> None:
+        """The last session's settings, if any (silently skipped when unreadable)."""
+        path = remembered_settings_path()
+        if path.is_file():
+            try:
+                self.session.load_config(RunConfig.from_yaml(path))
+            except SsdpcError:
+                pass
+
+    def _save_dialog(self, *_):
+        path, _ = QFileDialog.getSaveFileName(self, "Save settings", "ssdpc-settings.yaml", "YAML (*.yaml *.yml)")
+        if path:
+            self.save_settings(path)
+
+    def _load_dialog(self, *_):
+        path, _ = QFileDialog.getOpenFileName(self, "Load settings", "", "YAML (*.yaml *.yml)")
+        if path:
+            self.load_settings(path)
+
+    def _open_raw_dialog(self, *_):
+        path, _ = QFileDialog.getOpenFileName(self, "Open raw frame", "", "TIFF (*.tif *.tiff)")
+        if path:
+            self.open_raw(path)
