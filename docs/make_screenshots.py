@@ -59,19 +59,19 @@ def main():
     viewer.open_sample("napari-ssdpc", "pmma_bead")
     optics_w = OpticsWidget(viewer)
     docks = {"optics": viewer.window.add_dock_widget(optics_w, name="1. Optics", area="right")}
-    viewer.layers.selection.active = viewer.layers["PMMA bead (raw light field)"]
+    viewer.layers.selection.active = viewer.layers["PMMA bead"]
     optics_w._from_layer()
 
     # 2. calibrate on the white frame
     cal_w = CalibrateWidget(viewer)
     docks["calibrate"] = viewer.window.add_dock_widget(cal_w, name="2. Calibrate", area="right", tabify=True)
-    cal_w.image.value = viewer.layers["PMMA bead white frame"]
+    cal_w.image.value = viewer.layers["PMMA bead white"]
     cal_w.run()
     wait_for(app, cal_w.runner)
     print(cal_w.status.value)
-    white = viewer.layers["PMMA bead white frame"]
+    white = viewer.layers["PMMA bead white"]
     white.visible = True
-    viewer.layers["PMMA bead (raw light field)"].visible = False
+    viewer.layers["PMMA bead"].visible = False
     g = cal_w.calibration.grid
     viewer.camera.center = (g.axis_px[1], g.axis_px[0])
     viewer.camera.zoom = 0.9 * viewer.window._qt_viewer.canvas.size[1] / (7 * g.pitch_px)
@@ -84,16 +84,16 @@ def main():
     rec_w = ReconstructWidget(viewer)
     docks["operators"] = viewer.window.add_dock_widget(op_w, name="3. Operators", area="right", tabify=True)
     docks["reconstruct"] = viewer.window.add_dock_widget(rec_w, name="4. Reconstruct", area="right", tabify=True)
-    op_w.calibration.value = viewer.layers["PMMA bead white frame EI circles"]
+    op_w.calibration.value = viewer.layers["PMMA bead white EI circles"]
     op_w.z_min.value, op_w.z_max.value, op_w.dz.value = Z[0], Z[1], DZ
     op_w.run()
     wait_for(app, op_w.runner)
-    rec_w.raw.value = viewer.layers["PMMA bead (raw light field)"]
-    rec_w.flat.value = viewer.layers["PMMA bead flat frame"]
+    rec_w.raw.value = viewer.layers["PMMA bead"]
+    rec_w.flat.value = viewer.layers["PMMA bead flat"]
     rec_w.run()
     wait_for(app, rec_w.runner)
     print(rec_w.status.value)
-    ri = viewer.layers["PMMA bead (raw light field) RI"]
+    ri = viewer.layers["PMMA bead RI"]
 
     # the RI volume in 3D (minimum-intensity projection: the bead has a lower index than the oil)
     viewer.dims.ndisplay = 3

@@ -27,13 +27,13 @@ def prepare_bead(viewer, qtbot, widgets, optics, z, dz):
     for data, kw, kind in sample_data.pmma_bead_sample():
         getattr(viewer, f"add_{kind}")(data, **kw)
     widgets["optics"].set_optics(optics)
-    widgets["calibrate"].image.value = viewer.layers["PMMA bead white frame"]
+    widgets["calibrate"].image.value = viewer.layers["PMMA bead white"]
     widgets["calibrate"].run()
     wait_for(qtbot, widgets["calibrate"])
     op = widgets["operators"]
-    op.calibration.value = viewer.layers["PMMA bead white frame EI circles"]
+    op.calibration.value = viewer.layers["PMMA bead white EI circles"]
     op.z_min.value, op.z_max.value, op.dz.value = z[0], z[1], dz
     rc = widgets["reconstruct"]
-    rc.raw.value = viewer.layers["PMMA bead (raw light field)"]
-    rc.flat.value = viewer.layers["PMMA bead flat frame"]
+    rc.raw.value = viewer.layers["PMMA bead"]
+    rc.flat.value = viewer.layers["PMMA bead flat"]
     return widgets

@@ -44,7 +44,7 @@ def test_widgets_opened_from_the_plugins_menu_share_one_session_and_reach_an_ri_
     w["reconstruct"].run()
     _steps.wait_for(qtbot, w["reconstruct"])
     assert shown == []
-    ri = viewer.layers["PMMA bead (raw light field) RI"]
+    ri = viewer.layers["PMMA bead RI"]
     assert ri.data.shape[0] == 11 and np.allclose(ri.scale[0], DZ)
     settings = ri.metadata["ssdpc"]["settings"]
     assert settings["method"] == "tv" and settings["tv_sign"] == "lighter" and settings["tv_iterations_run"] <= 30
@@ -58,6 +58,7 @@ def test_widgets_opened_from_the_plugins_menu_share_one_session_and_reach_an_ri_
 def test_the_ssdpc_dock_runs_the_workflow_and_fits_a_laptop_screen(make_napari_viewer, qtbot, monkeypatch, tmp_path):
     """The one dock from the Plugins menu: its tabs are the shared widgets, its settings file is the
     one the command line reads, and with every dock open the window stays within 1280 x 800."""
+    from napari_ssdpc._napari.placement import scale_bar
     from napari_ssdpc._napari.widgets.dock import SsdpcDock
     from napari_ssdpc.settings.config import RunConfig
 
@@ -101,7 +102,13 @@ def test_the_ssdpc_dock_runs_the_workflow_and_fits_a_laptop_screen(make_napari_v
     w["reconstruct"].run()
     _steps.wait_for(qtbot, w["reconstruct"])
     assert shown == []
-    ri = viewer.layers["PMMA bead (raw light field) RI"]
+    ri = viewer.layers["PMMA bead RI"]
     assert ri.data.shape[0] == 11 and ri.metadata["ssdpc"]["settings"]["tv_sign"] == "lighter"
+    # one world in µm: raw frames (at the object-space pixel) and calibration overlays beside the volume
+    assert {str(u) for lyr in viewer.layers for u in lyr.units[-2:]} == {"micrometer"}
+    raw = viewer.layers["PMMA bead"]
+    assert np.allclose(raw.scale, optics.object_pixel_um) and scale_bar(viewer).visible
+    circles = viewer.layers["PMMA bead white EI circles"]
+    assert np.allclose(circles.scale, raw.scale) and np.allclose(circles.translate, raw.translate)
     # the run was remembered: a new dock in a new viewer starts from it
     assert RunConfig.from_yaml(_session.remembered_settings_path()).reconstruction.tv_iterations == 25

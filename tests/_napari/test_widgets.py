@@ -64,8 +64,8 @@ def test_end_to_end_bead(make_napari_viewer, qtbot, bead, errors):
     frame, flat, white, optics = bead
     viewer = make_napari_viewer()
     w = _setup_bead(viewer, qtbot, optics)
-    cal_layer = viewer.layers["PMMA bead white frame EI circles"]
-    assert len(cal_layer.data) == 32 and "PMMA bead white frame EI centres" in viewer.layers
+    cal_layer = viewer.layers["PMMA bead white EI circles"]
+    assert len(cal_layer.data) == 32 and "PMMA bead white EI centres" in viewer.layers
     assert "pitch" in w["calibrate"].result.value
 
     w["operators"].run()
@@ -77,7 +77,7 @@ def test_end_to_end_bead(make_napari_viewer, qtbot, bead, errors):
     _steps.wait_for(qtbot, w["reconstruct"])
     assert errors == []
     assert _widgets.session_for(viewer).built[1] is rec_built  # operators reused, not rebuilt
-    ri = viewer.layers["PMMA bead (raw light field) RI"]
+    ri = viewer.layers["PMMA bead RI"]
     assert ri.data.shape == (21, 145, 145)
     assert np.allclose(ri.scale, (DZ, optics.object_pixel_um, optics.object_pixel_um), rtol=2e-3)
     assert tuple(ri.axis_labels) == ("z", "y", "x") and ri.translate[0] == Z[0]
@@ -92,7 +92,7 @@ def test_end_to_end_bead(make_napari_viewer, qtbot, bead, errors):
     zc, yc, xc = np.round(ri.world_to_data((0.0, 0.0, 0.0))).astype(int)
     assert ri.data[zc, yc, xc] - optics.medium_index < -0.002
     # the inputs (sensor pixels) are hidden once the volume (µm) is there
-    assert ri.visible and not viewer.layers["PMMA bead (raw light field)"].visible
+    assert ri.visible and not viewer.layers["PMMA bead"].visible
 
     # rerun with more outputs: the RI layer is updated in place, new layers are named after the source
     n_layers = len(viewer.layers)
@@ -103,10 +103,10 @@ def test_end_to_end_bead(make_napari_viewer, qtbot, bead, errors):
     ri.colormap = "viridis"  # a display choice of the user: kept on rerun
     w["reconstruct"].run()
     _steps.wait_for(qtbot, w["reconstruct"])
-    assert viewer.layers["PMMA bead (raw light field) RI"] is ri and len(viewer.layers) == n_layers + 1
+    assert viewer.layers["PMMA bead RI"] is ri and len(viewer.layers) == n_layers + 1
     assert ri.colormap.name == "viridis"
     assert ri.metadata["ssdpc"]["settings"]["rl_iterations"] == ITER + 1
-    phase = viewer.layers["PMMA bead (raw light field) phase"]
+    phase = viewer.layers["PMMA bead phase"]
     assert phase.data.shape == ri.data.shape and phase.colormap.name == "RdBu_r"
 
     # the PSF stack of one lenslet, in µm
@@ -170,7 +170,7 @@ def test_cancel_stops_a_running_reconstruction(make_napari_viewer, qtbot, bead, 
     rl = [r for r in reports if r[2].startswith("RL")]
     assert rl[-1][0] < rl[-1][1] / 10  # far from the end of the 4 x 5000 iterations
     assert stopped_s < 10.0, f"took {stopped_s:.1f} s to stop"
-    assert rc.status.value == "cancelled" and "PMMA bead (raw light field) RI" not in viewer.layers
+    assert rc.status.value == "cancelled" and "PMMA bead RI" not in viewer.layers
     assert rc.run_button.enabled and not rc.cancel_button.enabled
     assert errors == []
 
@@ -183,7 +183,7 @@ def test_core_errors_are_notifications(make_napari_viewer, qtbot, bead, errors, 
     w = _setup_bead(viewer, qtbot, optics)
     assert warned == []
     # a core warning raised in the worker thread: calibrating on the flat frame (σ < 1)
-    w["calibrate"].image.value = viewer.layers["PMMA bead flat frame"]
+    w["calibrate"].image.value = viewer.layers["PMMA bead flat"]
     w["calibrate"].run()
     _steps.wait_for(qtbot, w["calibrate"])
     assert len(warned) == 1 and warned[0].startswith("flat frame (σ = 0.75, 24 lit lenslets)")

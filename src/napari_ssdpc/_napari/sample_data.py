@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from napari_ssdpc import __version__
+from napari_ssdpc._napari.placement import frame_transform
 
 SERIES_FRAMES = 20
 SERIES_SOURCE_STEP = 4  # reduced-cost source sampling of the time series (see module doc)
@@ -113,14 +114,15 @@ def pmma_bead_sample():
     frame, flat, white, optics = bead_frames()
     meta = _optics_meta(optics, "paper")
     lims = _contrast(frame)
+    um = frame_transform(optics, 2)  # in the volume's µm (placement.py)
     return [
         (
             white,
-            {"name": "PMMA bead white frame", "metadata": meta, "visible": False, "contrast_limits": lims},
+            {"name": "PMMA bead white", "metadata": meta, "visible": False, "contrast_limits": lims, **um},
             "image",
         ),
-        (flat, {"name": "PMMA bead flat frame", "metadata": meta, "visible": False, "contrast_limits": lims}, "image"),
-        (frame, {"name": "PMMA bead (raw light field)", "metadata": meta, "contrast_limits": lims}, "image"),
+        (flat, {"name": "PMMA bead flat", "metadata": meta, "visible": False, "contrast_limits": lims, **um}, "image"),
+        (frame, {"name": "PMMA bead", "metadata": meta, "contrast_limits": lims, **um}, "image"),
     ]
 
 
@@ -183,24 +185,26 @@ def moving_sample_series(n_frames: int = SERIES_FRAMES):
     meta = _optics_meta(optics, "water")
     lims = _contrast(flat)
     series = series_array(n_frames)
+    um = frame_transform(optics, 2)  # in the volume's µm (placement.py)
     return [
         (
             white,
-            {"name": "moving sample white frame", "metadata": meta, "visible": False, "contrast_limits": lims},
+            {"name": "moving sample white", "metadata": meta, "visible": False, "contrast_limits": lims, **um},
             "image",
         ),
         (
             flat,
-            {"name": "moving sample flat frame", "metadata": meta, "visible": False, "contrast_limits": lims},
+            {"name": "moving sample flat", "metadata": meta, "visible": False, "contrast_limits": lims, **um},
             "image",
         ),
         (
             series,
             {
-                "name": "moving sample (raw series)",
+                "name": "moving sample",
                 "metadata": meta,
                 "contrast_limits": lims,
                 "axis_labels": ("t", "y", "x"),
+                **frame_transform(optics, 3),
             },
             "image",
         ),

@@ -9,6 +9,8 @@ import numpy as np
 from magicgui.widgets import Container, Label, PushButton
 
 from napari_ssdpc._napari import notify
+from napari_ssdpc._napari.placement import frame_transform, place_frames
+from napari_ssdpc._napari.widgets.session import session_for
 from napari_ssdpc.errors import SsdpcWarning
 
 #: Smallest height of a dock's scrolling content: with every dock open, the window fits 1280 x 800.
@@ -87,7 +89,31 @@ def frame_index(viewer, layer) -> int | None:
 
 def show_layer(viewer, data, kwargs: dict, layer_type: str = "image"):
     """Add a layer, or update the one of the same name in place (same object, same position).
-    A layer whose dimensionality changes (a frame, then a series) is replaced at its position."""
+
+    A layer whose dimensionality changes (a frame, then a series) is replaced at its position. All
+    layers share one world in µm: frames still in sensor pixels are placed first, and a layer in
+    sensor pixels (a calibration's circles and centres) comes in placed (:mod:`..placement`).
+
+    Parameters
+    ----------
+    viewer : napari.Viewer
+    data : array_like or list
+        The layer data.
+    kwargs : dict
+        napari layer keyword arguments, with ``name``.
+    layer_type : str
+        'image', 'shapes' or 'points'.
+
+    Returns
+    -------
+    napari layer
+    """
+    optics = session_for(viewer).optics
+    place_frames(viewer, optics)
+    if kwargs.get("metadata", {}).get("ssdpc", {}).get("kind") != "result" and "units" not in kwargs:
+        kwargs = {**kwargs, **frame_transform(optics, np.ndim(data) if layer_type == "image" else 2)}
+        kwargs["metadata"] = {**kwargs.get("metadata", {})}
+        kwargs["metadata"]["ssdpc"] = {**kwargs["metadata"].get("ssdpc", {}), "placed": True}
     name = kwargs["name"]
     if name in viewer.layers:
         old = viewer.layers[name]

@@ -6,6 +6,7 @@ import numpy as np
 from magicgui.widgets import CheckBox, ComboBox, Container, FloatSpinBox, SpinBox
 
 from napari_ssdpc._napari import notify
+from napari_ssdpc._napari.placement import scale_bar
 from napari_ssdpc._napari.reader import result_layer
 from napari_ssdpc._napari.widgets.common import (
     compact,
@@ -217,5 +218,6 @@ class ReconstructWidget(Container):
                 if lyr.name == source or lyr.metadata.get("ssdpc", {}).get("kind") in ("raw", "calibration"):
                     lyr.visible = False
             self.viewer.fit_to_view(layers=[self.viewer.layers[f"{source} RI"]])
+            scale_bar(self.viewer).visible = True  # every layer is in µm now
         shape = next(iter(arrays.values())).shape
         return f"{source}: {' × '.join(map(str, shape))} voxels of {' × '.join(f'{v:.3g}' for v in res.voxel_um)} µm"

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 from psygnal import Signal
 
+from napari_ssdpc._napari.placement import follow_optics
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.settings.config import RunConfig
 from napari_ssdpc.settings.optics import Optics
@@ -180,6 +181,7 @@ def session_for(viewer) -> Session:
     if ref is None or ref() is not viewer:
         session = Session()
         _SESSIONS[key] = (weakref.ref(viewer), session)
+        follow_optics(viewer, session)  # frames shown in µm follow edits of the optics
         weakref.finalize(viewer, _SESSIONS.pop, key, None)  # free the operators with the viewer
     return session
 

@@ -1,0 +1,114 @@
+"""One world in micrometres: raw frames and calibration layers beside the reconstructed volumes.
+
+A raw frame lives in sensor pixels and a volume in object-space micrometres; napari refuses to
+mix the two ("Inconsistent units across layers"). Each elementary image is the object at the
+magnification M_EI, so a sensor pixel spans ``optics.object_pixel_um`` of the object (paper
+Eq. 10). Raw frames and the calibration's circles and centres are therefore shown with that
+pixel size, in µm, with the frame's centre at the origin, where the volume's optical axis is:
+every elementary image appears at the scale of the volume.
+"""
+
+from __future__ import annotations
+
+import weakref
+
+from napari_ssdpc.settings.optics import Optics
+
+__all__ = ["follow_optics", "frame_transform", "place_frames", "scale_bar"]
+
+
+def frame_transform(optics: Optics, ndim: int) -> dict:
+    """Scale, translation and units of a sensor-pixel layer in object-space micrometres.
+
+    Parameters
+    ----------
+    optics : Optics
+        The instrument (object pixel and sensor size).
+    ndim : int
+        2 for a (y, x) frame or its overlays, 3 for a (t, y, x) series.
+
+    Returns
+    -------
+    dict
+        ``scale`` (µm per pixel; 1 frame per t step), ``translate`` (µm; the sensor's centre at
+        0) and ``units`` ('pixel' for t, 'µm' for y and x), as napari layer keyword arguments.
+    """
+    s = float(optics.object_pixel_um)
+    centre = (-(optics.height_px - 1) / 2 * s, -(optics.width_px - 1) / 2 * s)
+    lead = ndim - 2
+    return {
+        "scale": (1.0,) * lead + (s, s),
+        "translate": (0.0,) * lead + centre,
+        "units": ("pixel",) * lead + ("µm", "µm"),
+    }
+
+
+def _in_pixels(layer) -> bool:
+    """A layer still in sensor pixels (napari's default unit), not one of our results."""
+    if layer.metadata.get("ssdpc", {}).get("kind") == "result":
+        return False
+    units = [str(u) for u in getattr(layer, "units", ())[-2:]]
+    return all(u == "pixel" for u in units)
+
+
+def place_frames(viewer, optics: Optics, again: bool = False) -> int:
+    """Show every layer that is still in sensor pixels in object-space µm (see the module notes).
+
+    Parameters
+    ----------
+    viewer : napari.Viewer
+    optics : Optics
+        Gives the object pixel and the sensor's centre.
+    again : bool
+        Also re-place the layers placed before (the optics changed).
+
+    Returns
+    -------
+    int
+        How many layers were placed.
+    """
+    n = 0
+    for layer in list(viewer.layers):
+        info = layer.metadata.setdefault("ssdpc", {})
+        if not (_in_pixels(layer) or (again and info.get("placed"))) or layer.ndim not in (2, 3):
+            continue
+        t = frame_transform(optics, layer.ndim)
+        layer.scale, layer.translate, layer.units = t["scale"], t["translate"], t["units"]
+        info["placed"] = True
+        n += 1
+    return n
+
+
+def follow_optics(viewer, session) -> None:
+    """Re-place the placed layers whenever the session's optics change.
+
+    Parameters
+    ----------
+    viewer : napari.Viewer
+    session : Session
+        Emits ``optics_changed`` with the new optics.
+    """
+    ref = weakref.ref(viewer)
+
+    def replace(optics):
+        v = ref()
+        if v is not None and any(lyr.metadata.get("ssdpc", {}).get("placed") for lyr in v.layers):
+            place_frames(v, optics, again=True)
+
+    session.optics_changed.connect(replace)
+
+
+def scale_bar(viewer):
+    """The viewer's scale-bar overlay (``canvas.overlays`` since napari 0.9, ``scale_bar`` before).
+
+    Parameters
+    ----------
+    viewer : napari.Viewer
+
+    Returns
+    -------
+    The scale-bar overlay model (``visible``, ``unit``, ...).
+    """
+    canvas = getattr(viewer, "canvas", None)
+    overlays = getattr(canvas, "overlays", None)
+    return overlays["scale_bar"] if overlays is not None else viewer.scale_bar
