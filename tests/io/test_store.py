@@ -26,6 +26,7 @@ class FakeRec:
     """The part of a Reconstructor that reconstruct_series uses: Δn = frame mean / 1e6."""
 
     z_um = np.array([0.0, 1.0])
+    y_um = x_um = (np.arange(8) - 3.5) * 0.5
     mask = np.ones((8, 8), bool)
     dz, pixel_um, build_seconds = 1.0, 0.5, 0.0
 
@@ -235,3 +236,24 @@ def test_an_unphysical_frame_is_not_written(setup, tmp_path, value, words):
     with pytest.raises(SsdpcError, match=f"frame 0: .*{words}"):
         reconstruct_series(frames, out, recipe, rec=Bad(), progress=False)
     assert list(done_frames(out)) == [] and np.isnan(read_complete(out, "ri")).all()
+
+
+def test_a_store_is_an_ngff_image_at_its_root_with_units_scale_and_translation(tmp_path):
+    """NGFF readers that look only at the root (ome-zarr-py, napari-ome-zarr, Fiji) find the RI volume,
+    with µm units, its voxel size and the position of its first voxel; each quantity keeps its group."""
+    import zarr
+
+    from napari_ssdpc.io.frames import create_ome_zarr
+
+    out = tmp_path / "s.zarr"
+    create_ome_zarr(out, "ri", (3, 5, 8, 9), "TZYX", (2.0, 0.5, 0.5), origin_um=(-4.0, -1.75, -2.0))
+    create_ome_zarr(out, "opd_nm", (3, 8, 9), "TYX", (2.0, 0.5, 0.5), origin_um=(-4.0, -1.75, -2.0))
+    root = zarr.open_group(str(out), mode="r")
+    ms = root.attrs["multiscales"][0]
+    assert ms["datasets"][0]["path"] == "ri/0" and root["ri/0"].shape == (3, 5, 8, 9)
+    assert [a.get("unit") for a in ms["axes"]] == [None, "micrometer", "micrometer", "micrometer"]
+    scale, shift = ms["datasets"][0]["coordinateTransformations"]
+    assert scale["scale"] == [1.0, 2.0, 0.5, 0.5] and shift["translation"] == [0.0, -4.0, -1.75, -2.0]
+    opd = root["opd_nm"].attrs["multiscales"][0]  # a 2D map: (t, y, x), one chunk per frame
+    assert opd["datasets"][0]["coordinateTransformations"][0]["scale"] == [1.0, 0.5, 0.5]
+    assert root["opd_nm/0"].chunks == (1, 8, 9)

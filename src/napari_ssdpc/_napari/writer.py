@@ -85,7 +85,7 @@ def write_ome_zarr(path, data, *, name: str, voxel_um, origin_um=(0.0, 0.0, 0.0)
     kept. The group is written into a temporary store next to ``path`` and moved into place."""
     import zarr
 
-    from napari_ssdpc.io.frames import create_ome_zarr
+    from napari_ssdpc.io.frames import create_ome_zarr, link_root_image
 
     path = Path(path)
     if not path.parent.exists():
@@ -100,16 +100,15 @@ def write_ome_zarr(path, data, *, name: str, voxel_um, origin_um=(0.0, 0.0, 0.0)
     shape = tuple(int(n) for n in np.shape(data))
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent))
     try:
-        arr = create_ome_zarr(tmp, name, shape, "TZYX"[-nd:], voxel_um, attrs=attrs, overwrite=True)
+        arr = create_ome_zarr(
+            tmp, name, shape, "TZYX"[-nd:], voxel_um, attrs=attrs, overwrite=True, origin_um=origin_um
+        )
         for idx in np.ndindex(*shape[:-3]):  # one time point at a time (dask-friendly)
             arr[idx] = np.asarray(data[idx], np.float32)
-        group = zarr.open_group(str(tmp), mode="a", zarr_format=2)[name]
-        ms = group.attrs["multiscales"]
-        translation = [0.0] * (nd - 3) + [float(v) for v in origin_um]
-        ms[0]["datasets"][0]["coordinateTransformations"].append({"type": "translation", "translation": translation})
-        group.attrs["multiscales"] = ms
-        zarr.open_group(str(path), mode="a", zarr_format=2)  # the store (created if new)
+        root = zarr.open_group(str(path), mode="a", zarr_format=2)  # the store (created if new)
         _replace_dir(tmp / name, path / name)
+        if name == "ri":  # NGFF readers that look at the root open the RI volume
+            link_root_image(root, name)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return path

@@ -19,6 +19,7 @@ from napari_ssdpc.files import atomic_write, atomic_write_set
 __all__ = [
     "atomic_write",
     "create_ome_zarr",
+    "link_root_image",
     "ngff_multiscales",
     "read_frame",
     "read_ome_zarr",
@@ -206,9 +207,25 @@ def write_ome_tiffs(files: dict) -> list[Path]:
 
 
 # ------------------------------------------------------------------ OME-Zarr
-def ngff_multiscales(axes: str, voxel_um, name: str) -> list:
+def ngff_multiscales(axes: str, voxel_um, name: str, origin_um=None) -> list:
     """OME-NGFF 0.4 ``multiscales`` metadata for one resolution level '0'.
-    ``axes`` like 'ZYX' or 'TZYX'; ``voxel_um`` is (dz, dy, dx); time steps are in frames."""
+
+    Parameters
+    ----------
+    axes : str
+        'ZYX', 'TZYX', 'YX', 'TYX' or 'TCZYX'; time steps are in frames.
+    voxel_um : sequence of float
+        (dz, dy, dx) in µm; a 2D map uses the last two.
+    name : str
+        The image's name.
+    origin_um : sequence of float, optional
+        (z, y, x) position of voxel 0 in µm (an NGFF translation); a 2D map uses the last two.
+
+    Returns
+    -------
+    list of dict
+        The ``multiscales`` attribute (axes with units, scale and translation).
+    """
     kinds = {
         "T": ("t", "time", None),
         "C": ("c", "channel", None),
@@ -220,15 +237,37 @@ def ngff_multiscales(axes: str, voxel_um, name: str) -> list:
     for a in axes.upper():
         n, t, u = kinds[a]
         ax.append({"name": n, "type": t, **({"unit": u} if u else {})})
-    scale = [1.0] * (len(axes) - 3) + [float(v) for v in voxel_um]
+    spatial = sum(a in "ZYX" for a in axes.upper())
+    lead = [0.0] * (len(axes) - spatial)
+    transforms = [{"type": "scale", "scale": [1.0] * len(lead) + [float(v) for v in voxel_um][-spatial:]}]
+    if origin_um is not None:
+        transforms.append({"type": "translation", "translation": lead + [float(v) for v in origin_um][-spatial:]})
     return [
         {
             "version": "0.4",
             "name": name,
             "axes": ax,
-            "datasets": [{"path": "0", "coordinateTransformations": [{"type": "scale", "scale": scale}]}],
+            "datasets": [{"path": "0", "coordinateTransformations": transforms}],
         }
     ]
+
+
+def link_root_image(root, name: str = "ri") -> None:
+    """Make the store's root an NGFF image too, pointing at ``name``'s arrays.
+
+    A store holds one image group per quantity; NGFF readers that look only at the root
+    (ome-zarr-py, napari-ome-zarr, Fiji) then open the RI volume.
+
+    Parameters
+    ----------
+    root : zarr.Group
+        The store's root group, opened for writing.
+    name : str
+        The image group the root shows.
+    """
+    ms = [dict(m) for m in root[name].attrs["multiscales"]]
+    ms[0]["datasets"] = [{**d, "path": f"{name}/{d['path']}"} for d in ms[0]["datasets"]]
+    root.attrs["multiscales"] = ms
 
 
 def create_ome_zarr(
@@ -241,9 +280,37 @@ def create_ome_zarr(
     attrs: dict | None = None,
     dtype="float32",
     overwrite=False,
+    origin_um=None,
 ):
     """Create (or open for appending) the image group ``path/name`` of an OME-Zarr store.
-    Returns the zarr array of level '0'. One chunk per frame by default."""
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.zarr`` store (created if new).
+    name : str
+        Image group ('ri', 'phase', ...); the 'ri' group is also linked from the root.
+    shape : tuple of int
+        Full array shape, e.g. (t, z, y, x).
+    axes : str
+        Axes of ``shape`` ('TZYX', 'TYX', ...).
+    voxel_um : sequence of float
+        (dz, dy, dx), µm.
+    chunks : tuple of int, optional
+        Default: one chunk per frame.
+    attrs : dict, optional
+        Kept under the group's ``napari_ssdpc`` attribute.
+    dtype : str
+    overwrite : bool
+        Replace an existing group of that name.
+    origin_um : sequence of float, optional
+        (z, y, x) position of voxel 0, µm (the NGFF translation).
+
+    Returns
+    -------
+    zarr.Array
+        Level '0' of the image, filled with NaN.
+    """
     import zarr
 
     root = zarr.open_group(str(path), mode="a", zarr_format=2)
@@ -256,10 +323,14 @@ def create_ome_zarr(
             )
         return arr
     grp = root.create_group(name, overwrite=True)
-    grp.attrs["multiscales"] = ngff_multiscales(axes, voxel_um, name)
+    grp.attrs["multiscales"] = ngff_multiscales(axes, voxel_um, name, origin_um)
     grp.attrs["napari_ssdpc"] = {"software": SOFTWARE, **(attrs or {})}  # how readers know our images
-    chunks = chunks or ((1,) * (len(shape) - 3) + tuple(shape[-3:]))
-    return grp.create_array("0", shape=tuple(shape), chunks=tuple(chunks), dtype=dtype, fill_value=np.nan)
+    spatial = sum(a in "ZYX" for a in axes.upper())
+    chunks = chunks or ((1,) * (len(shape) - spatial) + tuple(shape[-spatial:]))
+    arr = grp.create_array("0", shape=tuple(shape), chunks=tuple(chunks), dtype=dtype, fill_value=np.nan)
+    if name == "ri":
+        link_root_image(root, name)
+    return arr
 
 
 def read_ome_zarr(path, name: str = "ri"):

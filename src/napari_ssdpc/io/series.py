@@ -86,8 +86,14 @@ def _reconstructor(recipe: Recipe):
 # ---------------------------------------------------------------- outputs
 def _describe(recipe: Recipe, save):
     rec = _reconstructor(recipe)
+    return _grid(rec, save)
+
+
+def _grid(rec, save):
+    """(layout, voxel µm, origin µm, settings, build s) of a Reconstructor's output."""
     dz, dy = rec.dz, rec.pixel_um
-    return outputs.layout(len(rec.z_um), rec.mask.shape, save), (dz, dy, dy), rec.settings(), rec.build_seconds
+    origin = (float(rec.z_um[0]), float(rec.y_um[0]), float(rec.x_um[0]))  # the optical axis at y = x = 0
+    return outputs.layout(len(rec.z_um), rec.mask.shape, save), (dz, dy, dy), origin, rec.settings(), rec.build_seconds
 
 
 def _write_frame(out: Path, t: int, images: dict) -> float:
@@ -194,15 +200,10 @@ def reconstruct_series(
     try:
         if distributed:
             client, cluster = _client(workers, scheduler)
-            layout, voxel, settings, build = client.submit(_describe, recipe, save, pure=False).result()
+            layout, voxel, origin, settings, build = client.submit(_describe, recipe, save, pure=False).result()
         else:
             rec = recipe.build() if rec is None else rec
-            layout, voxel, settings, build = (
-                outputs.layout(len(rec.z_um), rec.mask.shape, save),
-                (rec.dz, rec.pixel_um, rec.pixel_um),
-                rec.settings(),
-                rec.build_seconds,
-            )
+            layout, voxel, origin, settings, build = _grid(rec, save)
         stamp = {
             "input": source.identity(),
             "frames": len(source),
@@ -211,7 +212,7 @@ def reconstruct_series(
             "outputs": sorted(layout),
         }
         attrs = {**(meta or {}), "settings": settings}
-        done = open_store(out, len(source), layout, voxel, stamp, attrs)
+        done = open_store(out, len(source), layout, voxel, stamp, attrs, origin)
         finished = set(np.flatnonzero(done[:] == 1).tolist())
         pending = [t for t in range(len(source)) if t not in finished]
         if stop_after is not None:

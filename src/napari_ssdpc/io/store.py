@@ -123,7 +123,7 @@ def _check_resume(out: Path, old: dict, stamp: dict) -> None:
         )
 
 
-def _create(out: Path, n_frames, layout, voxel, stamp: dict, attrs: dict) -> None:
+def _create(out: Path, n_frames, layout, voxel, stamp: dict, attrs: dict, origin_um=None) -> None:
     """Build the complete empty store in a hidden folder and rename it into place."""
     import zarr
 
@@ -139,7 +139,15 @@ def _create(out: Path, n_frames, layout, voxel, stamp: dict, attrs: dict) -> Non
         root = zarr.open_group(str(tmp), mode="w", zarr_format=2)
         root.attrs[STAMP] = stamp
         for name, (shape, axes, what) in layout.items():
-            create_ome_zarr(tmp, name, (n_frames,) + tuple(shape), "T" + axes, voxel, attrs={**attrs, "quantity": what})
+            create_ome_zarr(
+                tmp,
+                name,
+                (n_frames,) + tuple(shape),
+                "T" + axes,
+                voxel,
+                attrs={**attrs, "quantity": what},
+                origin_um=origin_um,
+            )
         root.create_array(DONE, shape=(n_frames,), chunks=(1,), dtype="uint8", fill_value=0)
         if out.exists():  # an empty folder, or one left by a killed creation
             for p in out.iterdir():
@@ -151,7 +159,7 @@ def _create(out: Path, n_frames, layout, voxel, stamp: dict, attrs: dict) -> Non
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def open_store(out, n_frames: int, layout: dict, voxel, stamp: dict, attrs: dict):
+def open_store(out, n_frames: int, layout: dict, voxel, stamp: dict, attrs: dict, origin_um=None):
     """Create the store, or reopen it to resume the same job. Returns the done-flags array.
 
     Parameters
@@ -168,6 +176,8 @@ def open_store(out, n_frames: int, layout: dict, voxel, stamp: dict, attrs: dict
         What the store holds; its ``input`` is the input's identity (path, size, mtime_ns, sha256).
     attrs : dict
         Metadata stored with every image group.
+    origin_um : tuple of float, optional
+        (z, y, x) position of voxel 0, µm: the NGFF translation of every image.
 
     Returns
     -------
@@ -185,14 +195,16 @@ def open_store(out, n_frames: int, layout: dict, voxel, stamp: dict, attrs: dict
     if old is None:
         if out.exists() and any(out.iterdir()) and not _killed_creation(out):
             raise SsdpcError(f"{out} exists and was not written by `ssdpc reconstruct`; choose a new output path")
-        _create(out, n_frames, layout, voxel, stamp, attrs)
+        _create(out, n_frames, layout, voxel, stamp, attrs, origin_um)
     else:
         _check_resume(out, old, stamp)
     root = zarr.open_group(str(out), mode="r+", zarr_format=2)
     try:
         for name, (shape, axes, _) in layout.items():
             if not (name in root and "0" in root[name]):  # a store of an older version, half made
-                create_ome_zarr(out, name, (n_frames,) + tuple(shape), "T" + axes, voxel, overwrite=True)
+                create_ome_zarr(
+                    out, name, (n_frames,) + tuple(shape), "T" + axes, voxel, overwrite=True, origin_um=origin_um
+                )
         if DONE not in root:
             root.create_array(DONE, shape=(n_frames,), chunks=(1,), dtype="uint8", fill_value=0)
         for p in out.rglob("*.partial"):  # a temporary chunk file of a killed run
