@@ -217,3 +217,9 @@ def test_optics_widget_design_numbers_are_live(make_napari_viewer, tmp_path):
     ow.path.value = p
     ow.load()
     assert ow.fields["fourier_lens_mm"].value == 150.0
+    # the paper's condenser NA 0.1: few lenslets straddle the source edge, and the widget says what it costs
+    ow.set_optics(Optics.paper())
+    assert "⚠ only 4 lenslets straddle the source edge" in ow.design.value
+    ow.fields["condenser_na"].value = 0.3  # sigma 0.75: the outer rings straddle it
+    d = design(_widgets.session_for(viewer).optics)
+    assert "⚠" not in ow.design.value and f"axial FWHM {d['expected_axial_fwhm_um']:.1f} µm" in ow.design.value

@@ -10,7 +10,7 @@ from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.widgets.common import catching_warnings, compact, wrap
 from napari_ssdpc._napari.widgets.session import session_for
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.physics.design import design
+from napari_ssdpc.physics.design import design, design_warnings
 from napari_ssdpc.settings.optics import Optics
 
 __all__ = ["OPTICS_FIELDS", "OpticsWidget", "design_text"]
@@ -71,6 +71,9 @@ def design_text(optics: Optics) -> str:
             f"{d['lenslets_outside']} outside",
             f"σ {d['sigma']:.2f} · M_EI {d['m_ei']:.3f} · object pixel {d['object_pixel_um']:.4f} µm",
             f"pitch {d['pitch_px']:.2f} px · EI radius {d['ei_radius_px']:.2f} px",
+            f"expected axial FWHM {d['expected_axial_fwhm_um']:.1f} µm from the {d['lenslets_straddling']} "
+            "lenslets that straddle the source edge",
+            *("⚠ " + w for w in design_warnings(optics)),
         ]
     )
 
