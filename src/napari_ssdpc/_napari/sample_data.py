@@ -1,8 +1,10 @@
-"""napari sample data: simulated frames, generated on demand and cached (no downloads).
+"""napari sample data: simulated frames, shipped or generated on demand and cached (no downloads).
 
 - ``pmma_bead_sample``: the paper's PMMA bead (13 µm, n 1.49 in oil 1.518), its flat frame
-  (same condenser NA) and a white frame (condenser fully open, for calibration), paper optics.
-  About 30 s on two cores the first time, then read from the cache.
+  (same condenser NA 0.3) and a white frame (condenser fully open, for calibration), paper optics
+  with a 1024 x 1024 px camera region that holds the whole pupil. The three frames ship with the
+  package (``data/``, 3 MB, written by :func:`ship_bead_frames`), so the sample opens in about
+  0.5 s; were they stale, it would be simulated (about a minute on two cores) and cached.
 - ``moving_sample_series``: a swimming cell-like sample in water (``phantoms.moving_sample``),
   20 frames. Reduced cost: the condenser disk is sampled every 4 lattice units
   (``Source(step=4)``, 221 source points instead of 821; about 4 s per frame instead of 18 s,
@@ -27,6 +29,10 @@ import numpy as np
 from napari_ssdpc import __version__
 from napari_ssdpc._napari.placement import frame_transform
 
+#: Sample frames shipped with the package (``ship_bead_frames``): the bead opens at once.
+SHIPPED = Path(__file__).parent / "data"
+#: The bead sample's camera region of interest (px): the whole objective pupil (radius 435 px) fits.
+BEAD_ROI_PX = 1024
 SERIES_FRAMES = 20
 SERIES_SOURCE_STEP = 4  # reduced-cost source sampling of the time series (see module doc)
 
@@ -50,8 +56,9 @@ def _cached(name: str, make, key: str = "") -> np.ndarray:
     from napari_ssdpc.io.frames import write_tiff
 
     path = cache_dir() / (f"{name}-{key}.tif" if key else f"{name}.tif")
-    if path.is_file():
-        return tifffile.imread(path)
+    for known in (SHIPPED / path.name, path):  # shipped with the package, else made here before
+        if known.is_file():
+            return tifffile.imread(known)
     data = make()
     write_tiff(path, data, photometric="minisblack")
     return data
@@ -92,7 +99,9 @@ def bead_frames():
     from napari_ssdpc.settings.optics import Optics
     from napari_ssdpc.simulation import simulate as sim
 
-    optics = Optics.paper().replace(condenser_na=0.3)  # the condenser-NA sweep of docs/validation.md
+    optics = Optics.paper().replace(  # NA 0.3: the condenser-NA sweep of docs/validation.md
+        condenser_na=0.3, width_px=BEAD_ROI_PX, height_px=BEAD_ROI_PX, name="paper optics, 1024 px region"
+    )
     base = (_physics(optics), __version__)
     frame = _cached(
         "pmma_bead",
@@ -106,6 +115,35 @@ def bead_frames():
         "pmma_bead_white", lambda: sim.white_frame(optics, rng=np.random.default_rng(2)), _key("white", *base, 2)
     )
     return frame, flat, white, optics
+
+
+def ship_bead_frames(folder: Path = SHIPPED) -> list[Path]:
+    """Write the bead sample's frames (zlib-compressed TIFFs) where the package reads them first.
+
+    Run after a change of the simulator or of the sample's optics (the file names carry a hash
+    of both, so stale frames are never read; the sample is then simulated on first use).
+
+    Parameters
+    ----------
+    folder : Path
+        Default: the package's ``_napari/data``.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
+    import tifffile
+
+    bead_frames()  # simulated into the cache if needed
+    folder.mkdir(parents=True, exist_ok=True)
+    out = []
+    for made in sorted(cache_dir().glob("pmma_bead*.tif")):
+        frame = tifffile.imread(made)
+        if frame.shape == (BEAD_ROI_PX, BEAD_ROI_PX):
+            tifffile.imwrite(folder / made.name, frame, compression="zlib", photometric="minisblack")
+            out.append(folder / made.name)
+    return out
 
 
 def pmma_bead_sample():
