@@ -1,5 +1,5 @@
 """The ssDPC dock: the whole workflow in one dock, as tabs (optics, calibrate, method, reconstruct,
-profile), with the settings file the command line reads.
+profile, movie), with the settings file the command line reads.
 
 Each tab holds one of the widgets that can also be opened on its own; all of them share the
 viewer's :class:`~napari_ssdpc._napari.widgets.session.Session`, so the dock and any separate
@@ -17,6 +17,7 @@ from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.profiles import ProfileWidget
 from napari_ssdpc._napari.widgets.calibrate import CalibrateWidget
 from napari_ssdpc._napari.widgets.common import MIN_DOCK_HEIGHT_PX
+from napari_ssdpc._napari.widgets.movie import MovieWidget
 from napari_ssdpc._napari.widgets.operators import OperatorsWidget
 from napari_ssdpc._napari.widgets.optics import OpticsWidget
 from napari_ssdpc._napari.widgets.reconstruct import ReconstructWidget
@@ -35,6 +36,7 @@ TABS = (
     ("Method", OperatorsWidget),
     ("Reconstruct", ReconstructWidget),
     ("Profile", ProfileWidget),
+    ("Movie", MovieWidget),
 )
 
 
