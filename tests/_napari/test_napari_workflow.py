@@ -112,3 +112,39 @@ def test_the_ssdpc_dock_runs_the_workflow_and_fits_a_laptop_screen(make_napari_v
     assert np.allclose(circles.scale, raw.scale) and np.allclose(circles.translate, raw.translate)
     # the run was remembered: a new dock in a new viewer starts from it
     assert RunConfig.from_yaml(_session.remembered_settings_path()).reconstruction.tv_iterations == 25
+
+
+def test_a_series_streams_to_ome_zarr_and_is_shown_from_disk(make_napari_viewer, qtbot, monkeypatch, tmp_path):
+    """'all frames' with a store: every frame is written as it finishes (the resumable writer of the
+    command line) and the RI layer is read back from disk, never held in memory as a whole."""
+    import zarr
+
+    from napari_ssdpc.io.store import done_frames
+
+    shown = []
+    monkeypatch.setattr(_notify, "error", lambda msg: shown.append(str(msg)))
+    viewer = make_napari_viewer()
+    w = {}
+    for name in MENU[:4]:
+        _, widget = viewer.window.add_plugin_dock_widget("napari-ssdpc", name)
+        w[name.split(". ")[1].lower()] = widget
+    frame, flat, white, optics = _sample_data.bead_frames()
+    _steps.prepare_bead(viewer, qtbot, w, optics, Z, DZ)
+    viewer.add_image(np.stack([frame, frame, frame]), name="bead series", axis_labels=("t", "y", "x"))
+    w["operators"].sign.value, w["operators"].tv_iterations.value = "lighter", 10
+    rc = w["reconstruct"]
+    rc.raw.value, rc.frames.value, rc.store.value = viewer.layers["bead series"], "all frames", tmp_path / "bead.zarr"
+    rc.run()
+    _steps.wait_for(qtbot, rc)
+    assert shown == [] and sorted(done_frames(tmp_path / "bead.zarr")) == [0, 1, 2]
+    ri = viewer.layers["bead RI"]
+    assert ri.data.shape[:2] == (3, 11) and not isinstance(ri.data, np.ndarray)  # lazy, from the store
+    first = np.asarray(ri.data[0])
+    assert np.allclose(np.asarray(ri.data[2]), first) and first.min() - optics.medium_index < -0.002
+    assert np.allclose(ri.scale[-3:], (DZ, optics.object_pixel_um, optics.object_pixel_um), rtol=2e-3)
+    assert (
+        zarr.open_group(str(tmp_path / "bead.zarr"), mode="r").attrs["multiscales"][0]["datasets"][0]["path"] == "ri/0"
+    )
+    rc.run()  # a rerun resumes: nothing left to do
+    _steps.wait_for(qtbot, rc)
+    assert shown == [] and "3 frames written" in rc.status.value

@@ -382,6 +382,9 @@ def result_layer(data, quantity: str, voxel_um, origin_um, *, name: str, info: d
     spatial = 2 if _is_map(quantity) else 3  # a 2D map (OPD, dry mass) or a volume
     time = data.ndim == spatial + 1
     first = np.asarray(data[0] if time else data, np.float32)
+    first = first[np.isfinite(first)]  # a series still being written: its later frames are NaN
+    if first.size == 0:
+        first = np.zeros(1, np.float32)
     centre = 0.0
     if quantity == "ri":
         centre = float(info.get("medium_index") or (info.get("optics") or {}).get("medium_index") or np.median(first))

@@ -15,13 +15,15 @@ __all__ = ["FrameSource", "PagedSeries"]
 
 
 class FrameSource:
-    """Raw frames (t, y, x) of a TIFF series, read one at a time; or an in-memory array.
+    """Raw frames (t, y, x) of a TIFF series, read one at a time; or an in-memory or lazy (dask) array
+    (a dask array is named by its graph: frames simulated or read on demand are not read to hash them).
 
     Pickles as its path (Dask workers reopen the file themselves)."""
 
     def __init__(self, source):
-        self.path = None if isinstance(source, np.ndarray) else Path(source)
-        self._array = source if isinstance(source, np.ndarray) else None
+        in_memory = not isinstance(source, (str, Path))  # a NumPy array, or a lazy (dask) one
+        self.path = None if in_memory else Path(source)
+        self._array = source if in_memory else None
         self._data = None
         a = self._open()
         if a.ndim not in (2, 3):
@@ -49,6 +51,12 @@ class FrameSource:
         dict
         """
         h = hashlib.sha256()
+        if self.path is None and not isinstance(self._array, np.ndarray):  # lazy: its graph names it
+            token = str(getattr(self._array, "name", ""))
+            if not token:
+                raise SsdpcError("a series must be a file, a NumPy array or a dask array; save it as a TIFF first")
+            h.update(f"{self._array.dtype}{self._array.shape}{token}".encode())
+            return {"path": "lazy array", "size": None, "mtime_ns": None, "frames": len(self), "sha256": h.hexdigest()}
         if self.path is None:
             a = np.ascontiguousarray(self._array)
             h.update(f"{a.dtype.str}{a.shape}".encode())

@@ -170,12 +170,15 @@ def reconstruct_series(
     progress: bool = True,
     rec=None,
     stop_after: int | None = None,
+    on_frame=None,
 ) -> SeriesReport:
     """Stream ``source`` (a FrameSource, TIFF path or (t, y, x) array) through the recipe's
     Reconstructor into the OME-Zarr ``out``; see the module docstring.
 
     ``rec``: an already built Reconstructor of this recipe (serial runs only). ``stop_after``:
-    process at most this many pending frames (a partial run, for tests and previews)."""
+    process at most this many pending frames (a partial run, for tests and previews).
+    ``on_frame(t, done, total)``: called after each frame is written (e.g. the napari widget's
+    progress; raising there stops the run between frames, and the store stays resumable)."""
     source = source if isinstance(source, FrameSource) else FrameSource(source)
     out = Path(out)
     if not out.parent.is_dir():
@@ -226,6 +229,8 @@ def reconstruct_series(
             for t in pending:
                 timings.append(process_frame(rec, source, t, out, save))
                 bar.update(1)
+                if on_frame is not None:
+                    on_frame(t, len(finished) + len(timings), len(source))
         bar.close()
         return SeriesReport(
             len(source),

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
-from magicgui.widgets import CheckBox, ComboBox, Container, FloatSpinBox, SpinBox
+from magicgui.widgets import CheckBox, ComboBox, Container, FileEdit, FloatSpinBox, SpinBox
+from qtpy.QtCore import QTimer
 
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.placement import scale_bar
@@ -22,7 +25,10 @@ from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.reconstruction.outputs import QUANTITIES
 from napari_ssdpc.settings.reconstruction import ReconstructionSettings
 
-__all__ = ["ReconstructWidget", "result_arrays"]
+__all__ = ["WATCH_MS", "ReconstructWidget", "result_arrays"]
+
+#: How often a series written to disk is shown again while it runs, ms.
+WATCH_MS = 1000
 
 
 def result_arrays(res, wanted) -> dict:
@@ -109,6 +115,12 @@ class ReconstructWidget(Container):
         }
         for name, box in self.outputs.items():
             setattr(self, f"out_{name}", box)
+        self.store = FileEdit(mode="w", filter="*.zarr")
+        self.store.label = "series to"
+        self.store.tooltip = (
+            "OME-Zarr folder (NAME.zarr) for 'all frames': each frame is written as it finishes and shown "
+            "from disk (the series is never held in memory; a rerun resumes); empty: keep the frames in memory"
+        )
         self.run_button, self.cancel_button, self.status = run_buttons("Reconstruct", "RI volume of the frame(s)")
         self.extend(
             [
@@ -117,6 +129,7 @@ class ReconstructWidget(Container):
                 self.iterations,
                 self.alpha,
                 self.frames,
+                self.store,
                 *self.outputs.values(),
                 self.run_button,
                 self.cancel_button,
@@ -124,6 +137,7 @@ class ReconstructWidget(Container):
             ]
         )
         self.runner = JobRunner("Reconstruct", self.run_button, self.cancel_button, self.status)
+        self._watch, self._shown_frames = None, -1  # the store being written, shown as it grows
         self.run_button.changed.connect(self.run)
         self.session.optics_loaded.connect(self._defaults)
         self.session.settings_loaded.connect(self.show_settings)
@@ -173,6 +187,8 @@ class ReconstructWidget(Container):
         indices = list(range(data.shape[0])) if series else [t]
         built = self.session.matching(spec)
         iterations = int(self.iterations.value)
+        if series and str(self.store.value or "").endswith(".zarr"):
+            return self._stream(layer, spec, wanted, built, iterations, Path(self.store.value))
 
         def work(progress, should_stop):
             rec = built or build_reconstructor(spec, progress)
@@ -194,6 +210,70 @@ class ReconstructWidget(Container):
             return rec, out, res
 
         return self.runner.start(work, lambda r: self._done(spec, layer.name, indices, *r), "Reconstruct")
+
+    def _stream(self, layer, spec, wanted, built, iterations, store: Path):
+        """Every frame of a series into the OME-Zarr ``store``, shown from disk as frames finish."""
+        from napari_ssdpc.io.frame_source import FrameSource
+        from napari_ssdpc.io.series import Recipe, reconstruct_series
+
+        try:
+            settings = self.session.settings()
+        except SsdpcError as e:
+            notify.error(e)
+            return None
+        flat = None if spec["flat"] is None else np.asarray(spec["flat"])
+        recipe = Recipe(spec["optics"], spec["calibration"], dict(settings=settings, stacks=spec["stacks"]), flat)
+        path = layer.metadata.get("ssdpc", {}).get("path")
+        frames = path if path and Path(path).is_file() else layer.data  # a file streams from disk
+        optics = spec["optics"]
+        meta = {"source": layer.name, "optics": optics.to_dict(), "medium_index": optics.medium_index}
+
+        def work(progress, should_stop):
+            rec = built or build_reconstructor(spec, progress)
+            rec.iterations = iterations
+            reconstruct_series(
+                FrameSource(frames),
+                store,
+                recipe,
+                save=[q for q in wanted if q != "ri"],
+                meta=meta,
+                progress=False,
+                rec=rec,
+                on_frame=lambda t, done, total: progress(done, total, f"frame {t} written to {store.name}"),
+            )
+            return rec
+
+        worker = self.runner.start(work, lambda rec: self._streamed(spec, rec, store), "Reconstruct")
+        if worker is not None:
+            self._shown_frames = -1
+            self._watch = QTimer()
+            self._watch.timeout.connect(lambda: self._show_store(store))
+            self._watch.start(WATCH_MS)
+        return worker
+
+    def _show_store(self, store: Path) -> None:
+        """Show the store's frames written so far (unwritten frames are NaN); stop with the job."""
+        from napari_ssdpc._napari.reader import read_result
+        from napari_ssdpc.io.store import done_frames
+
+        running = self.runner.running
+        if store.is_dir() and (store / "ri").is_dir():
+            n = len(done_frames(store))
+            if n != self._shown_frames and n > 0:
+                self._shown_frames = n
+                for data, kwargs, kind in read_result(store):
+                    if kwargs["name"] in self.viewer.layers:  # new frames: keep the display as it is
+                        kwargs = {k: v for k, v in kwargs.items() if k != "contrast_limits"}
+                    show_layer(self.viewer, data, kwargs, kind)
+        if not running and self._watch is not None:
+            self._watch.stop()
+            self._watch = None
+
+    def _streamed(self, spec, rec, store: Path):
+        self.session.built = (spec, rec)
+        self.session.operators_built.emit(rec)
+        self._show_store(store)
+        return f"{store.name}: {self._shown_frames} frames written"
 
     def _done(self, spec, source, indices, rec, arrays, res):
         self.session.built = (spec, rec)
