@@ -1,22 +1,44 @@
-"""Screenshots for docs/napari.md, made with the plugin's own widgets on the simulated PMMA bead.
+"""Screenshots for docs/napari.md, made through the ssDPC dock on the PMMA bead sample, with the
+timings a user meets (sample open, calibration, reconstruction, the longest GUI stall).
 
-    xvfb-run -a python docs/make_screenshots.py          # headless (or run it on a desktop)
+    xvfb-run -a python docs/make_screenshots.py              # into docs/_screenshots/ (git ignores it)
+    xvfb-run -a python docs/make_screenshots.py --update-docs  # into docs/images/, for the docs
 
-Writes docs/images/napari_calibration.png, napari_3d.png, napari_orthogonal.png and
-napari_profile.png. It follows the walk-through of docs/napari.md step by step (sample data,
-Optics, Calibrate, Operators, Reconstruct, Line profile), with a z range of -40..40 µm every 2 µm
-so that it runs in about a minute (plus ~30 s the first time, to simulate the bead).
+It follows the walk-through of docs/napari.md step by step in a 1280 x 800 window (sample data,
+Optics, Calibrate, Method, Reconstruct, Profile), with a z range of -40..40 µm every 2 µm.
 """
 
 from __future__ import annotations
 
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
 
-OUT = Path(__file__).resolve().parent / "images"
+DOCS = Path(__file__).resolve().parent
+OUT = DOCS / ("images" if "--update-docs" in sys.argv else "_screenshots")
 Z = (-40.0, 40.0)
 DZ = 2.0
+WINDOW = (1280, 800)
+
+
+class StallMeter:
+    """The longest gap between ticks of a 20 ms Qt timer: how long the GUI was blocked."""
+
+    def __init__(self):
+        from qtpy.QtCore import QTimer
+
+        self.last, self.worst, self.where, self.label = time.perf_counter(), 0.0, "", "start"
+        self.timer = QTimer()
+        self.timer.timeout.connect(self._tick)
+        self.timer.start(20)
+
+    def _tick(self):
+        now = time.perf_counter()
+        if now - self.last > self.worst:
+            self.worst, self.where = now - self.last, self.label
+        self.last = now
 
 
 def wait_for(app, runner, timeout_s=600):
@@ -44,54 +66,63 @@ def grab(viewer, path, canvas_only=False):
 
 def main():
     import napari
+    from napari.settings import get_settings
     from qtpy.QtWidgets import QApplication
 
-    from napari_ssdpc._napari.profiles import ProfileWidget
-    from napari_ssdpc._napari.widgets import CalibrateWidget, OperatorsWidget, OpticsWidget, ReconstructWidget
+    from napari_ssdpc._napari.placement import scale_bar
 
     OUT.mkdir(exist_ok=True)
-    napari.settings.get_settings().application.gui_notification_level = "error"  # no toasts in the pictures
+    get_settings().application.gui_notification_level = "error"  # no toasts in the pictures
     viewer = napari.Viewer(title="napari-ssdpc")
     app = QApplication.instance()
-    viewer.window._qt_window.resize(1800, 1100)
+    window = viewer.window._qt_window
+    window.resize(*WINDOW)
+    stalls = StallMeter()
+    times = {}
 
-    # 1. sample data and optics
+    # the dock, then the sample data and its optics
+    _, dock = viewer.window.add_plugin_dock_widget("napari-ssdpc", "ssDPC")
+    tabs = dock.tabs
+    t0 = time.perf_counter()
+    stalls.label = "opening the sample"
     viewer.open_sample("napari-ssdpc", "pmma_bead")
-    optics_w = OpticsWidget(viewer)
-    docks = {"optics": viewer.window.add_dock_widget(optics_w, name="1. Optics", area="right")}
+    app.processEvents()
+    times["sample open"] = time.perf_counter() - t0
     viewer.layers.selection.active = viewer.layers["PMMA bead"]
-    optics_w._from_layer()
+    tabs["Optics"]._from_layer()
 
-    # 2. calibrate on the white frame
-    cal_w = CalibrateWidget(viewer)
-    docks["calibrate"] = viewer.window.add_dock_widget(cal_w, name="2. Calibrate", area="right", tabify=True)
+    # calibrate on the white frame
+    cal_w = tabs["Calibrate"]
+    dock.tab_widget.setCurrentIndex(1)
     cal_w.image.value = viewer.layers["PMMA bead white"]
+    stalls.label, t0 = "calibrating", time.perf_counter()
     cal_w.run()
     wait_for(app, cal_w.runner)
+    times["calibration"] = time.perf_counter() - t0
     print(cal_w.status.value)
     white = viewer.layers["PMMA bead white"]
     white.visible = True
     viewer.layers["PMMA bead"].visible = False
     g = cal_w.calibration.grid
-    viewer.camera.center = (g.axis_px[1], g.axis_px[0])
-    viewer.camera.zoom = 0.9 * viewer.window._qt_viewer.canvas.size[1] / (7 * g.pitch_px)
-    docks["calibrate"].raise_()
+    viewer.camera.center = tuple(white.data_to_world((g.axis_px[1], g.axis_px[0])))
+    viewer.camera.zoom = 0.9 * viewer.window._qt_viewer.canvas.size[1] / (7 * g.pitch_px * white.scale[-1])
     app.processEvents()
     grab(viewer, OUT / "napari_calibration.png")
 
-    # 3. operators, 4. reconstruct (RI + phase)
-    op_w = OperatorsWidget(viewer)
-    rec_w = ReconstructWidget(viewer)
-    docks["operators"] = viewer.window.add_dock_widget(op_w, name="3. Operators", area="right", tabify=True)
-    docks["reconstruct"] = viewer.window.add_dock_widget(rec_w, name="4. Reconstruct", area="right", tabify=True)
+    # method and reconstruct (RI)
+    op_w, rec_w = tabs["Method"], tabs["Reconstruct"]
+    dock.tab_widget.setCurrentIndex(2)
     op_w.calibration.value = viewer.layers["PMMA bead white EI circles"]
     op_w.z_min.value, op_w.z_max.value, op_w.dz.value = Z[0], Z[1], DZ
-    op_w.run()
-    wait_for(app, op_w.runner)
+    op_w.sign.value = "lighter"  # PMMA in oil
+    dock.tab_widget.setCurrentIndex(3)
     rec_w.raw.value = viewer.layers["PMMA bead"]
     rec_w.flat.value = viewer.layers["PMMA bead flat"]
+    stalls.label, t0 = "reconstructing", time.perf_counter()
     rec_w.run()
     wait_for(app, rec_w.runner)
+    times["operators + reconstruction"] = time.perf_counter() - t0
+    stalls.label = "inspecting"
     print(rec_w.status.value)
     ri = viewer.layers["PMMA bead RI"]
 
@@ -100,7 +131,6 @@ def main():
     viewer.axes.visible = True  # z, y, x arrows in the corner
     viewer.reset_view(layers=[ri])
     viewer.camera.angles = (-20, 35, 140)
-    docks["reconstruct"].raise_()
     app.processEvents()
     grab(viewer, OUT / "napari_3d.png")
 
@@ -112,11 +142,10 @@ def main():
 
     viewer.dims.ndisplay = 2
     viewer.axes.visible = False
-    centre = np.round(ri.world_to_data((0.0, 0.0, 0.0))).astype(int)
     panels = []
     for order, title in (((0, 1, 2), "xy (z = 0 µm)"), ((1, 0, 2), "xz (y = 0 µm)"), ((2, 0, 1), "yz (x = 0 µm)")):
         viewer.dims.order = order
-        viewer.dims.current_step = tuple(int(c) for c in centre)
+        viewer.dims.set_point([0, 1, 2], (0.0, 0.0, 0.0))  # through the bead centre (world µm)
         viewer.reset_view(layers=[ri])
         app.processEvents()
         panels.append((viewer.screenshot(canvas_only=True, flash=False), title))
@@ -135,9 +164,9 @@ def main():
     fig.savefig(OUT / "napari_orthogonal.png", dpi=90)
     print(f"wrote {OUT / 'napari_orthogonal.png'}")
 
-    # 5. line profiles: an xy line through the bead, and an axial (xz) line drawn in the xz view
-    prof = ProfileWidget(viewer)
-    viewer.window.add_dock_widget(prof, name="5. Line profile", area="right", tabify=True).raise_()
+    # line profiles: an xy line through the bead, and an axial (xz) line drawn in the xz view
+    prof = tabs["Profile"]
+    dock.tab_widget.setCurrentIndex(4)
     prof.image.value = ri
     lines = prof.new_line_layer()
     to_vox = lambda p: (np.asarray(p) - ri.translate) / ri.scale  # noqa: E731, RUF100
@@ -145,10 +174,16 @@ def main():
     lines.add_lines(np.stack([to_vox((-36.0, 0.0, 0.0)), to_vox((36.0, 0.0, 0.0))]))
     lines.mode = "pan_zoom"
     viewer.dims.order = (1, 0, 2)  # the xz view: the axial line lies in it
-    viewer.dims.current_step = tuple(int(c) for c in centre)
+    viewer.dims.set_point([0, 1, 2], (0.0, 0.0, 0.0))
     viewer.reset_view(layers=[ri])
     app.processEvents()
     grab(viewer, OUT / "napari_profile.png")
+    size = window.size()
+    print(
+        "; ".join(f"{k} {v:.1f} s" for k, v in times.items())
+        + f"; longest GUI stall {stalls.worst:.2f} s ({stalls.where}); window {size.width()} x {size.height()} px;"
+        f" scale bar {'on' if scale_bar(viewer).visible else 'off'}"
+    )
     viewer.close()
 
 

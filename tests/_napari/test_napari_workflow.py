@@ -32,7 +32,7 @@ def test_widgets_opened_from_the_plugins_menu_share_one_session_and_reach_an_ri_
     w = {}
     for name in MENU:
         _, widget = viewer.window.add_plugin_dock_widget("napari-ssdpc", name)
-        w[name.split(". ")[1].lower()] = widget
+        w[name.split(". ")[1].lower()] = widget.inner  # the step inside its scrolling dock
     sessions = {id(x.session) for x in w.values() if hasattr(x, "session")}
     assert len(sessions) == 1  # one model for the viewer, whatever proxy each widget was given
     assert next(iter(w.values())).session is _widgets.session_for(viewer)
@@ -127,7 +127,7 @@ def test_a_series_streams_to_ome_zarr_and_is_shown_from_disk(make_napari_viewer,
     w = {}
     for name in MENU[:4]:
         _, widget = viewer.window.add_plugin_dock_widget("napari-ssdpc", name)
-        w[name.split(". ")[1].lower()] = widget
+        w[name.split(". ")[1].lower()] = widget.inner  # the step inside its scrolling dock
     frame, flat, white, optics = _sample_data.bead_frames()
     _steps.prepare_bead(viewer, qtbot, w, optics, Z, DZ)
     viewer.add_image(np.stack([frame, frame, frame]), name="bead series", axis_labels=("t", "y", "x"))

@@ -163,7 +163,11 @@ def wrap(label: Label) -> Label:
     Label
         The same label.
     """
+    from qtpy.QtWidgets import QSizePolicy
+
     label.native.setWordWrap(True)
+    # its long lines never set the dock's width: it takes the width there is and wraps
+    label.native.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
     return label
 
 
@@ -181,5 +185,5 @@ def compact(container: Container) -> Container:
     Container
         The same container.
     """
-    container.native.setMinimumHeight(MIN_DOCK_HEIGHT_PX)
+    container.root_native_widget.setMinimumHeight(MIN_DOCK_HEIGHT_PX)  # the scroll area around ``native``
     return container

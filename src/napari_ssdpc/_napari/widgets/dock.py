@@ -25,7 +25,16 @@ from napari_ssdpc._napari.widgets.session import remembered_settings_path, sessi
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.settings.config import RunConfig
 
-__all__ = ["DOCK_WIDTH_PX", "SsdpcDock"]
+__all__ = [
+    "DOCK_WIDTH_PX",
+    "Scrolling",
+    "SsdpcDock",
+    "CalibrateDock",
+    "OperatorsDock",
+    "OpticsDock",
+    "ProfileDock",
+    "ReconstructDock",
+]
 
 #: Width the dock asks for: room for a label and a spin box, the rest of a laptop screen for the canvas.
 DOCK_WIDTH_PX = 360
@@ -46,6 +55,67 @@ def _scrolling(widget: QWidget) -> QScrollArea:
     area.setWidget(widget)
     area.setMinimumHeight(MIN_DOCK_HEIGHT_PX)
     return area
+
+
+class Scrolling(QWidget):
+    """One step's widget in its scroll area, as napari docks it from the Plugins menu.
+
+    napari docks a magicgui widget's content, not the scroll area around it; this hands napari the
+    scroll area, so that every dock can shrink and the window fits a laptop screen.
+
+    Parameters
+    ----------
+    widget : magicgui Container (made scrollable) or QWidget
+        The step's widget.
+
+    Attributes
+    ----------
+    inner : magicgui Container or QWidget
+        The step's widget.
+    """
+
+    def __init__(self, widget):
+        super().__init__()
+        self.inner = widget
+        area = widget.root_native_widget if hasattr(widget, "root_native_widget") else _scrolling(widget)
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.addWidget(area)
+
+
+class OpticsDock(Scrolling):
+    """The Optics step as a dock of its own (Plugins menu)."""
+
+    def __init__(self, napari_viewer):
+        super().__init__(OpticsWidget(napari_viewer))
+
+
+class CalibrateDock(Scrolling):
+    """The Calibrate step as a dock of its own (Plugins menu)."""
+
+    def __init__(self, napari_viewer):
+        super().__init__(CalibrateWidget(napari_viewer))
+
+
+class OperatorsDock(Scrolling):
+    """The Method (operators) step as a dock of its own (Plugins menu)."""
+
+    def __init__(self, napari_viewer):
+        super().__init__(OperatorsWidget(napari_viewer))
+
+
+class ReconstructDock(Scrolling):
+    """The Reconstruct step as a dock of its own (Plugins menu)."""
+
+    def __init__(self, napari_viewer):
+        super().__init__(ReconstructWidget(napari_viewer))
+
+
+class ProfileDock(Scrolling):
+    """The line profile as a dock of its own (Plugins menu)."""
+
+    def __init__(self, napari_viewer):
+        super().__init__(ProfileWidget(napari_viewer))
 
 
 class SsdpcDock(QWidget):
@@ -70,7 +140,7 @@ class SsdpcDock(QWidget):
         self.tab_widget = QTabWidget()
         self.tab_widget.setUsesScrollButtons(True)
         for title, w in self.tabs.items():  # the magicgui steps scroll themselves
-            self.tab_widget.addTab(w.native if hasattr(w, "native") else _scrolling(w), title)
+            self.tab_widget.addTab(w.root_native_widget if hasattr(w, "native") else _scrolling(w), title)
         buttons = QHBoxLayout()
         for text, tip, slot in (
             ("Open raw…", "open a raw light-field frame or (t, y, x) series (TIFF)", self._open_raw_dialog),
