@@ -64,3 +64,53 @@ def test_the_build_can_read_the_version():
     found = re.search(r"""^__version__\s*=\s*["']([^"']+)["']""", source, re.MULTILINE)
     assert found is not None, "_version.py must hold __version__ = '<x.y.z>' as a literal"
     assert re.fullmatch(r"\d+\.\d+\.\d+", found.group(1))
+
+
+def _public_definitions(path: Path):
+    """(name, node) of every public function, class and public method of a module."""
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, (ast.FunctionDef, ast.ClassDef)) and not node.name.startswith("_"):
+            yield node.name, node
+            if isinstance(node, ast.ClassDef):
+                for item in node.body:
+                    if isinstance(item, ast.FunctionDef) and not item.name.startswith("_"):
+                        yield f"{node.name}.{item.name}", item
+
+
+@pytest.mark.parametrize("path", MODULES, ids=lambda p: str(p.relative_to(PKG)))
+def test_public_definitions_have_numpydoc_docstrings(path):
+    """Every public function, class and method says what it does; one that takes arguments has a
+    numpydoc Parameters section (with shapes and units where they apply)."""
+    missing, no_parameters = [], []
+    for name, node in _public_definitions(path):
+        doc = ast.get_docstring(node)
+        if not doc:
+            missing.append(name)
+            continue
+        if isinstance(node, ast.FunctionDef):
+            args = [a.arg for a in node.args.args + node.args.kwonlyargs if a.arg not in ("self", "cls")]
+            decorators = {getattr(d, "id", getattr(d, "attr", "")) for d in node.decorator_list}
+            if args and "property" not in decorators and "Parameters" not in doc:
+                no_parameters.append(name)
+    assert not missing, f"no docstring: {', '.join(missing)}"
+    assert not no_parameters, f"no Parameters section: {', '.join(no_parameters)}"
+
+
+PACKAGES = sorted(p.parent for p in PKG.glob("*/__init__.py"))
+
+
+@pytest.mark.parametrize("package", PACKAGES, ids=lambda p: p.name)
+def test_every_package_declares_its_public_api(package):
+    """Each package's ``__init__`` names what it offers (``__all__``), and every name it lists exists."""
+    tree = ast.parse((package / "__init__.py").read_text())
+    declared = [
+        node
+        for node in tree.body
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", "") == "__all__" for t in node.targets)
+    ]
+    assert declared, f"{package.name}/__init__.py has no __all__"
+    names = ast.literal_eval(declared[0].value)
+    defined = {a.asname or a.name for n in tree.body if isinstance(n, ast.ImportFrom) for a in n.names}
+    submodules = {p.stem for p in package.glob("*.py")} | {p.name for p in package.iterdir() if p.is_dir()}
+    unknown = [n for n in names if n not in defined and n not in submodules]
+    assert names and not unknown, f"{package.name}: __all__ lists {unknown}, which it does not import"

@@ -10,7 +10,7 @@ pytest.importorskip("pytestqt")
 pytest.importorskip("napari_animation")
 
 from napari_ssdpc._napari import notify as _notify
-from napari_ssdpc._napari.reader import result_layer
+from napari_ssdpc._napari.layers import result_layer
 from napari_ssdpc._napari.widgets.movie import MovieWidget
 
 

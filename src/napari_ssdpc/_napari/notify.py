@@ -8,15 +8,30 @@ __all__ = ["error", "info", "warning"]
 
 
 def error(message) -> None:
-    """Show ``message`` (a string or an exception's one-line text) as a napari error."""
+    """Show ``message`` (a string or an exception's one-line text) as a napari error.
+
+    Parameters
+    ----------
+    message : str or Exception
+    """
     notifications.show_error(str(message))
 
 
 def warning(message) -> None:
-    """Show ``message`` as a napari warning."""
+    """Show ``message`` as a napari warning.
+
+    Parameters
+    ----------
+    message : str or Exception
+    """
     notifications.show_warning(str(message))
 
 
 def info(message) -> None:
-    """Show ``message`` as a napari information toast."""
+    """Show ``message`` as a napari information toast.
+
+    Parameters
+    ----------
+    message : str or Exception
+    """
     notifications.show_info(str(message))

@@ -33,7 +33,23 @@ def sample_line(data, start, end, n: int | None = None):
     Leading axes beyond the last three (time) must be constant along the line; they are taken
     at the nearest index. Returns (s, coords, values): the fraction along the line (n,), the
     voxel coordinates (ndim, n) and the linearly interpolated values (n,). ``n`` defaults to one
-    sample per voxel of length, plus one."""
+    sample per voxel of length, plus one.
+
+    Parameters
+    ----------
+    data : array_like
+        The layer's data, (z, y, x) or (t, z, y, x) (or 2D).
+    start, end : array_like, (ndim,)
+        End points in data (voxel) coordinates.
+    n : int, optional
+        Number of samples.
+
+    Returns
+    -------
+    s : ndarray, (n,)
+    coords : ndarray, (ndim, n)
+    values : ndarray, float32, (n,)
+    """
     start, end = np.asarray(start, float), np.asarray(end, float)
     nd = np.ndim(data)
     if start.shape != (nd,) or end.shape != (nd,):
@@ -55,7 +71,21 @@ def sample_line(data, start, end, n: int | None = None):
 
 def world_line_profile(layer, world_start, world_end, n: int | None = None) -> dict:
     """Profile of image ``layer`` along a segment given in world coordinates (µm for our
-    layers): distance (µm), values, world coordinates (n, ndim) and voxel coordinates."""
+    layers): distance (µm), values, world coordinates (n, ndim) and voxel coordinates.
+
+    Parameters
+    ----------
+    layer : napari Image layer
+    world_start, world_end : array_like, (ndim,)
+        End points in world coordinates (µm).
+    n : int, optional
+        Number of samples.
+
+    Returns
+    -------
+    dict
+        ``distance_um`` (n,), ``values`` (n,), ``world`` (n, ndim), ``voxel`` (n, ndim).
+    """
     w0, w1 = np.asarray(world_start, float), np.asarray(world_end, float)
     a = np.asarray(layer.world_to_data(w0), float)
     b = np.asarray(layer.world_to_data(w1), float)
@@ -65,7 +95,18 @@ def world_line_profile(layer, world_start, world_end, n: int | None = None) -> d
 
 
 def orientation(world_start, world_end, labels) -> str:
-    """'xy', 'xz', 'yz', 'axial (z)', 'along x', ... from the axes along which the line runs."""
+    """'xy', 'xz', 'yz', 'axial (z)', 'along x', ... from the axes along which the line runs.
+
+    Parameters
+    ----------
+    world_start, world_end : array_like
+    labels : sequence of str
+        Axis labels ('t', 'z', 'y', 'x').
+
+    Returns
+    -------
+    str
+    """
     d = np.abs(np.asarray(world_end, float) - np.asarray(world_start, float))
     moving = [lab for lab, v in zip(labels, d) if v > 1e-9 * max(d.max(), 1.0)]
     order = {"x": 0, "y": 1, "z": 2}
@@ -179,6 +220,12 @@ class ProfileWidget(QWidget):
             pass
 
     def new_line_layer(self, *_):
+        """Add a Shapes layer for lines, at the image's µm scale, in line-drawing mode.
+
+        Returns
+        -------
+        napari Shapes layer
+        """
         img = self.image.value
         if img is None:
             return None
@@ -215,6 +262,13 @@ class ProfileWidget(QWidget):
         return out
 
     def compute(self) -> list[dict]:
+        """The profiles of every line of the chosen Shapes layer through the chosen image.
+
+        Returns
+        -------
+        list of dict
+            One profile per line (see :func:`world_line_profile`), with its line index and orientation.
+        """
         img = self.image.value
         if img is None:
             return []
@@ -227,6 +281,7 @@ class ProfileWidget(QWidget):
         return out
 
     def update(self, *_):
+        """Recompute the profiles and redraw the plot."""
         try:
             self.profiles = self.compute()
         except SsdpcError as e:
@@ -252,7 +307,17 @@ class ProfileWidget(QWidget):
     def export_csv(self, path):
         """Write all profiles: line, orientation, sample, distance_um, world coordinates (µm; t in
         frames), value. Returns the path, or None (with a notification) when there is nothing to
-        write or no file name."""
+        write or no file name.
+
+        Parameters
+        ----------
+        path : str or Path
+            The CSV file.
+
+        Returns
+        -------
+        Path or None
+        """
         if not self.profiles:
             notify.error("no profile to export: draw a line in the lines layer first")
             return None

@@ -1,9 +1,9 @@
 """napari readers: raw light-field frames, calibration JSON, reconstruction outputs.
 
 Each ``get_*_reader(path)`` looks inside the file and returns None when it is not its own, so
-napari can try another reader. The layer-building helpers (``calibration_layers``,
-``result_layer``) are shared with the widgets, so a file opened from disk looks exactly like a
-freshly computed result.
+napari can try another reader. The layers are built as the widgets build them
+(``calibration_layers`` here, ``layers.result_layer``), so a file opened from disk looks exactly
+like a freshly computed result.
 """
 
 from __future__ import annotations
@@ -13,16 +13,14 @@ from pathlib import Path
 
 import numpy as np
 
+from napari_ssdpc._napari.layers import is_map, result_layer
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.reconstruction.outputs import QUANTITIES, display
+from napari_ssdpc.reconstruction.outputs import QUANTITIES
 
 RESULT_FORMAT = "napari-ssdpc-result"
 RESULT_VERSION = 1
 MIN_FRAME_PX = 32  # smaller images are not light-field frames
 MAX_JSON_BYTES = 50_000_000
-
-#: Display of a lenslet's PSF stack (Operators widget): not a reconstruction output.
-PSF_STYLE = ("PSF", "magma", "fraction of one lenslet's light per pixel", False)
 
 
 def _stem(p: Path) -> str:
@@ -43,7 +41,17 @@ def _path(path):
 
 # =========================================================================== raw frames
 def get_raw_reader(path):
-    """Reader for raw light-field frames: a 2D frame or a (t, y, x) series in a TIFF/OME-TIFF."""
+    """Reader for raw light-field frames: a 2D frame or a (t, y, x) series in a TIFF/OME-TIFF.
+
+    Parameters
+    ----------
+    path : str or list of str
+
+    Returns
+    -------
+    callable or None
+        :func:`read_raw`, or None when the file is not a raw frame or series.
+    """
     p = _path(path)
     if p is None or p.suffix.lower() not in (".tif", ".tiff") or not p.is_file():
         return None
@@ -87,7 +95,17 @@ def _complete(tif, size: int) -> bool:
 def open_lazy(path, squeeze: bool = True):
     """The data without reading the pixels: a numpy memmap where the file allows it (an
     uncompressed TIFF), else a dask array over tifffile's zarr store. ``squeeze``: drop
-    length-1 axes."""
+    length-1 axes.
+
+    Parameters
+    ----------
+    path : str or Path
+    squeeze : bool
+
+    Returns
+    -------
+    numpy.memmap or dask.array.Array
+    """
     import tifffile
 
     try:
@@ -102,6 +120,16 @@ def open_lazy(path, squeeze: bool = True):
 
 
 def read_raw(path):
+    """The raw frame or (t, y, x) series of a TIFF as one lazy image layer.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    list of (data, kwargs, 'image')
+    """
     p = Path(path)
     data = open_lazy(p)
     first = np.asarray(data[0] if data.ndim == 3 else data)
@@ -118,7 +146,16 @@ def read_raw(path):
 
 # ========================================================================== calibration
 def get_calibration_reader(path):
-    """Reader for our calibration JSON (``format: napari-ssdpc-calibration``)."""
+    """Reader for our calibration JSON (``format: napari-ssdpc-calibration``).
+
+    Parameters
+    ----------
+    path : str or list of str
+
+    Returns
+    -------
+    callable or None
+    """
     p = _path(path)
     if p is None or p.suffix.lower() != ".json" or not p.is_file() or p.stat().st_size > MAX_JSON_BYTES:
         return None
@@ -134,6 +171,16 @@ def get_calibration_reader(path):
 
 
 def read_calibration(path):
+    """A calibration JSON as its EI-circles and centres layers.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    list of layer data tuples
+    """
     from napari_ssdpc.calibration.calibrate import Calibration
 
     p = Path(path)
@@ -144,7 +191,18 @@ def read_calibration(path):
 def calibration_layers(cal, name: str) -> list:
     """Layer data of a calibration: a Shapes layer of EI circles (green: at least half inside the
     pupil, orange: clipped edge lenslets) and Points of the EI centres labelled (row, col), plus
-    the optical axis. Both carry the calibration dict in ``metadata['ssdpc']['calibration']``."""
+    the optical axis. Both carry the calibration dict in ``metadata['ssdpc']['calibration']``.
+
+    Parameters
+    ----------
+    cal : Calibration
+    name : str
+        Stem of the layer names.
+
+    Returns
+    -------
+    list of (data, kwargs, type)
+    """
     d = cal.to_dict()
     meta = {"ssdpc": {"kind": "calibration", "calibration": d}}
     r = float(cal.ei_radius_px)
@@ -205,7 +263,16 @@ _WORDS = [
 
 
 def get_result_reader(path):
-    """Reader for our reconstruction outputs: OME-TIFF (.ome.tif) or OME-Zarr (.zarr folder)."""
+    """Reader for our reconstruction outputs: OME-TIFF (.ome.tif) or OME-Zarr (.zarr folder).
+
+    Parameters
+    ----------
+    path : str or list of str
+
+    Returns
+    -------
+    callable or None
+    """
     p = _path(path)
     if p is None or not p.exists():
         return None
@@ -243,7 +310,17 @@ def _our_description(tif):
 
 
 def zarr_images(p: Path) -> list:
-    """[(name, group)] of our OME-NGFF image groups: the root itself or its child groups."""
+    """[(name, group)] of our OME-NGFF image groups: the root itself or its child groups.
+
+    Parameters
+    ----------
+    p : Path
+        The ``.zarr`` store.
+
+    Returns
+    -------
+    list of (str, zarr.Group)
+    """
     import zarr
 
     root = zarr.open_group(str(p), mode="r")
@@ -253,7 +330,19 @@ def zarr_images(p: Path) -> list:
 
 def quantity_key(desc: dict, hint: str = "") -> str:
     """Our quantity key ('ri', 'phase', 'dpc', ...) from a description, the image-group name or
-    the file-name suffix (OUT_phase.ome.tif), or the description's wording."""
+    the file-name suffix (OUT_phase.ome.tif), or the description's wording.
+
+    Parameters
+    ----------
+    desc : dict
+        Our description of the image.
+    hint : str
+        Group name or file-name suffix.
+
+    Returns
+    -------
+    str
+    """
     for q in (desc.get("quantity"), hint):
         if q in QUANTITIES or q in CHANNELS:
             return q
@@ -262,6 +351,17 @@ def quantity_key(desc: dict, hint: str = "") -> str:
 
 
 def read_result(path):
+    """Our OME-TIFF or OME-Zarr result as styled layers (lazy where the file allows).
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.ome.tif`` or ``.zarr``.
+
+    Returns
+    -------
+    list of (data, kwargs, 'image')
+    """
     p = Path(path)
     if p.is_dir():
         return _read_zarr(p)
@@ -277,7 +377,7 @@ def read_result(path):
     stem = _stem(p)
     hint = stem.rsplit("_", 1)[-1] if "_" in stem else ""
     q = quantity_key(desc, hint)
-    if "Z" not in axes and axes.endswith("YX") and not _is_map(q):  # one plane (--z 5 5): tifffile drops Z
+    if "Z" not in axes and axes.endswith("YX") and not is_map(q):  # one plane (--z 5 5): tifffile drops Z
         data, axes = data[..., np.newaxis, :, :], axes[:-2] + "ZYX"
     if q == hint or (hint == "n" and q == "delta_n"):  # OUT_phase.ome.tif, OUT_delta_n.ome.tif
         stem = stem[: -len(q) - 1]
@@ -336,80 +436,6 @@ def _result_layers(data, axes: str, desc: dict, voxel):
             _result_layers(data[(slice(None),) * i + (k,)], rest, {**desc, "quantity": name}, voxel)[0]
             for k, name in enumerate(names)
         ]
-    shape = (1, *data.shape[-2:]) if _is_map(desc.get("quantity", "ri")) else data.shape[-3:]
+    shape = (1, *data.shape[-2:]) if is_map(desc.get("quantity", "ri")) else data.shape[-3:]
     origin = _origin(desc, shape, voxel)
     return [result_layer(data, desc.get("quantity", "ri"), voxel, origin, name=desc.get("name", "volume"), info=desc)]
-
-
-def _is_map(key: str) -> bool:
-    """A 2D quantity (projected phase, OPD, dry mass): (y, x) per frame."""
-    q, _ = display(key)
-    return q is not None and q.kind == "map"
-
-
-def result_layer(data, quantity: str, voxel_um, origin_um, *, name: str, info: dict | None = None):
-    """Layer data tuple of a result, styled from the registry of output quantities.
-
-    Parameters
-    ----------
-    data : array_like
-        (z, y, x) volume or (y, x) map, or a series of them with a leading t axis.
-    quantity : str
-        Registry key or channel key ('ri', 'opd_nm', 'dpc_ud', ...), or 'psf'.
-    voxel_um, origin_um : sequence of float
-        (z, y, x) voxel size and position of voxel 0, µm (a map uses the last two).
-    name : str
-        Layer name stem; the quantity's label is appended.
-    info : dict, optional
-        Metadata kept under ``metadata['ssdpc']`` (settings, optics, source).
-
-    Returns
-    -------
-    tuple
-        napari's (data, kwargs, 'image'): scale in µm, axis labels, units, colormap, contrast
-        limits centred on the medium index (RI) or on 0 for signed quantities, and a 3D rendering
-        that shows the dominant sign.
-    """
-    info = dict(info or {})
-    q, suffix = display(quantity)
-    suffix, cmap, unit, centred = (
-        PSF_STYLE
-        if quantity == "psf"
-        else (suffix, "gray", "", False)
-        if q is None
-        else (suffix, q.colormap, q.unit or q.description, q.centred)
-    )
-    spatial = 2 if _is_map(quantity) else 3  # a 2D map (OPD, dry mass) or a volume
-    time = data.ndim == spatial + 1
-    first = np.asarray(data[0] if time else data, np.float32)
-    first = first[np.isfinite(first)]  # a series still being written: its later frames are NaN
-    if first.size == 0:
-        first = np.zeros(1, np.float32)
-    centre = 0.0
-    if quantity == "ri":
-        centre = float(info.get("medium_index") or (info.get("optics") or {}).get("medium_index") or np.median(first))
-    rendering = "mip"
-    if centred:
-        dev = first - centre
-        a = float(np.percentile(np.abs(dev), 99.9)) or float(np.abs(dev).max()) or 1e-6
-        lims = [centre - a, centre + a]
-        if -float(dev.min()) > float(dev.max()):
-            rendering = "minip"
-    else:
-        lo, hi = (float(v) for v in np.percentile(first, [0.1, 99.9]))
-        lims = [lo, hi if hi > lo else lo + 1e-6]
-    voxel = tuple(float(v) for v in voxel_um)[-spatial:]
-    origin = tuple(float(v) for v in origin_um)[-spatial:]
-    info.update(kind="result", quantity=quantity, unit=unit, voxel_um=list(voxel), origin_um=list(origin))
-    kwargs = {
-        "name": name if name.endswith(suffix) else f"{name} {suffix}",
-        "scale": ((1.0,) if time else ()) + voxel,
-        "translate": ((0.0,) if time else ()) + origin,
-        "axis_labels": (("t",) if time else ()) + ("z", "y", "x")[-spatial:],
-        "units": (("pixel",) if time else ()) + ("µm",) * spatial,
-        "colormap": cmap,
-        "contrast_limits": lims,
-        "rendering": rendering,
-        "metadata": {"ssdpc": info},
-    }
-    return (data, kwargs, "image")

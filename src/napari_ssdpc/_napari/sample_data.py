@@ -38,6 +38,12 @@ SERIES_SOURCE_STEP = 4  # reduced-cost source sampling of the time series (see m
 
 
 def cache_dir() -> Path:
+    """Where simulated sample frames are cached: ``$NAPARI_SSDPC_CACHE``/version (default ~/.cache/napari-ssdpc).
+
+    Returns
+    -------
+    Path
+    """
     root = os.environ.get("NAPARI_SSDPC_CACHE") or Path.home() / ".cache" / "napari-ssdpc"
     path = Path(root) / __version__
     path.mkdir(parents=True, exist_ok=True)
@@ -173,7 +179,18 @@ def series_optics():
 
 
 def series_frame(i: int, n_frames: int = SERIES_FRAMES) -> np.ndarray:
-    """Frame ``i`` of the moving-sample series (simulated once, then cached)."""
+    """Frame ``i`` of the moving-sample series (simulated once, then cached).
+
+    Parameters
+    ----------
+    i : int
+        Frame index.
+    n_frames : int
+
+    Returns
+    -------
+    ndarray, uint16, (H, W)
+    """
     from napari_ssdpc.simulation import simulate as sim
 
     optics = series_optics()
@@ -205,7 +222,16 @@ def series_flat_white():
 
 
 def series_array(n_frames: int = SERIES_FRAMES):
-    """Lazy (t, y, x) dask array: frame i is simulated (or read from the cache) when first used."""
+    """Lazy (t, y, x) dask array: frame i is simulated (or read from the cache) when first used.
+
+    Parameters
+    ----------
+    n_frames : int
+
+    Returns
+    -------
+    dask.array.Array, uint16, (t, H, W)
+    """
     import dask
     import dask.array as da
 
@@ -217,7 +243,16 @@ def series_array(n_frames: int = SERIES_FRAMES):
 
 def moving_sample_series(n_frames: int = SERIES_FRAMES):
     """A swimming cell-like sample in water, ``n_frames`` frames (lazy, simulated on demand), with
-    its flat and white frames."""
+    its flat and white frames.
+
+    Parameters
+    ----------
+    n_frames : int
+
+    Returns
+    -------
+    list of (data, kwargs, 'image')
+    """
     flat, white = series_flat_white()
     optics = series_optics()
     meta = _optics_meta(optics, "water")

@@ -26,7 +26,22 @@ from napari_ssdpc.io.frames import write_ome_tiff
 
 
 def write_volume(path: str, data, meta: dict) -> list[str]:
-    """npe2 single-layer writer for image layers of 3 or 4 dimensions."""
+    """npe2 single-layer writer for image layers of 3 or 4 dimensions.
+
+    Parameters
+    ----------
+    path : str
+        ``.ome.tif`` or ``.zarr``.
+    data : array_like
+        (z, y, x) or (t, z, y, x).
+    meta : dict
+        The layer's attributes (scale, translate, metadata).
+
+    Returns
+    -------
+    list of str
+        The paths written.
+    """
     data = data[0] if isinstance(data, list) else data  # multiscale: the full resolution
     if data.ndim not in (3, 4):
         raise SsdpcError(
@@ -42,7 +57,23 @@ def write_volume(path: str, data, meta: dict) -> list[str]:
 
 
 def write_result(path, data, *, voxel_um, origin_um=(0.0, 0.0, 0.0), info: dict | None = None) -> Path:
-    """Write a (z, y, x) or (t, z, y, x) result; ``.zarr`` -> OME-Zarr, else OME-TIFF."""
+    """Write a (z, y, x) or (t, z, y, x) result; ``.zarr`` -> OME-Zarr, else OME-TIFF.
+
+    Parameters
+    ----------
+    path : str or Path
+    data : array_like
+    voxel_um : sequence of float
+        (dz, dy, dx), µm.
+    origin_um : sequence of float
+        (z, y, x) of voxel 0, µm.
+    info : dict, optional
+        Our metadata (settings, optics, quantity).
+
+    Returns
+    -------
+    Path
+    """
     path = Path(path)
     desc = _description(info, voxel_um, origin_um)
     if path.suffix.lower() == ".zarr":
@@ -82,7 +113,21 @@ def write_ome_zarr(path, data, *, name: str, voxel_um, origin_um=(0.0, 0.0, 0.0)
     """Image group ``name`` (e.g. 'ri') of the OME-Zarr store ``path``, in the layout of
     ``core.io.create_ome_zarr`` that ``ssdpc reconstruct`` writes: OME-NGFF 0.4, zarr format 2,
     one chunk per time point, scale and translation in µm. Other image groups in the store are
-    kept. The group is written into a temporary store next to ``path`` and moved into place."""
+    kept. The group is written into a temporary store next to ``path`` and moved into place.
+
+    Parameters
+    ----------
+    path : str or Path
+    data : array_like
+    name : str
+    voxel_um : sequence of float
+    origin_um : sequence of float
+    attrs : dict, optional
+
+    Returns
+    -------
+    Path
+    """
     import zarr
 
     from napari_ssdpc.io.frames import create_ome_zarr, link_root_image

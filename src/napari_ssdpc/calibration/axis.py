@@ -22,7 +22,23 @@ from napari_ssdpc.settings.lenslets import circle_overlap_fraction
 
 
 def ei_brightness(img, centres, radius, inner=0.5):
-    """Mean of each EI inside ``inner`` x R (NaN where the disk leaves the frame)."""
+    """Mean of each EI inside ``inner`` x R (NaN where the disk leaves the frame).
+
+    Parameters
+    ----------
+    img : ndarray, float, (H, W)
+        The frame, camera units, dark level removed.
+    centres : ndarray, (K, 2)
+        EI centres (x, y), px.
+    radius : float
+        EI radius R, px.
+    inner : float
+        Fraction of R averaged over.
+
+    Returns
+    -------
+    ndarray, float64, (K,)
+    """
     r = inner * radius
     oy, ox = np.mgrid[-int(r) : int(r) + 1, -int(r) : int(r) + 1]
     inside = ox**2 + oy**2 <= r * r
@@ -37,7 +53,19 @@ def ei_brightness(img, centres, radius, inner=0.5):
 
 
 def all_cells(lat, shape):
-    """Centres of every lattice cell whose centre lies in the frame."""
+    """Centres of every lattice cell whose centre lies in the frame.
+
+    Parameters
+    ----------
+    lat : AffineLattice
+    shape : (int, int)
+        Frame shape (H, W).
+
+    Returns
+    -------
+    ndarray, (K, 2)
+        Cell centres (x, y), px.
+    """
     H, W = shape
     corners = np.array([[0, 0], [W - 1, 0], [0, H - 1], [W - 1, H - 1]], float)
     ij = lat.index(corners)
@@ -54,7 +82,33 @@ def fit_axis(xy, b, radius_um, um_per_px, optics, tilt):
     lenslet inside the disk of ``radius_um`` on the MLA (objective pupil or condenser
     disk), g_k = 1 + g_x X + g_y Y + g_2 (X² + Y²) a smooth illumination envelope about
     the axis (``tilt``; X, Y in units of the pupil radius). Returns axis, rms/s,
-    σ_axis and the parameters."""
+    σ_axis and the parameters.
+
+    Parameters
+    ----------
+    xy : ndarray, (K, 2)
+        EI centres (x, y), px.
+    b : ndarray, (K,)
+        EI brightness, camera units.
+    radius_um : float
+        Radius of the disk that lights the lenslets, µm on the MLA.
+    um_per_px : float
+        MLA µm per sensor pixel.
+    optics : Optics
+    tilt : bool
+        Fit the illumination envelope g_k too.
+
+    Returns
+    -------
+    axis : ndarray, (2,)
+        (x, y), px.
+    rms : float
+        Residual rms over s.
+    sigma : float
+        Standard error of the axis, px.
+    params : ndarray
+        All fitted parameters.
+    """
     ok = np.isfinite(b)
     xy, b = xy[ok], b[ok]
     r_ml = optics.lenslet_radius_um
@@ -101,7 +155,21 @@ def content_score(img, centres, radius) -> float:
     """How much structure the interior of the lit EIs holds, in units of its noise: the
     median over EIs of the rms of a local mean, after removing a quadratic surface (the
     illumination fall-off), against the noise of that mean. About 1 on an empty EI;
-    NaN when the EIs are too small to tell (under 24 px across)."""
+    NaN when the EIs are too small to tell (under 24 px across).
+
+    Parameters
+    ----------
+    img : ndarray, float, (H, W)
+        The frame, camera units, dark level removed.
+    centres : ndarray, (K, 2)
+        Centres (x, y) of the lit EIs, px.
+    radius : float
+        EI radius, px.
+
+    Returns
+    -------
+    float
+    """
     r = int(0.6 * radius)
     k = int(min(9, max(3, r // 3)))
     if r < 12:
@@ -132,7 +200,27 @@ def decide_kind(img, b, centres, r_ei, optics) -> tuple[str, bool, dict]:
 
     A frame with structure inside its EIs is a "sample" frame; otherwise it is "white"
     when about as many EIs are lit as lenslets lie in the pupil, else "flat". The evidence
-    holds the counts, the content score and "clear" or "borderline" for how sure that is."""
+    holds the counts, the content score and "clear" or "borderline" for how sure that is.
+
+    Parameters
+    ----------
+    img : ndarray, float, (H, W)
+        The frame, camera units, dark level removed.
+    b : ndarray, (K,)
+        Brightness of each EI, camera units.
+    centres : ndarray, (K, 2)
+        EI centres (x, y), px.
+    r_ei : float
+        EI radius, px.
+    optics : Optics
+
+    Returns
+    -------
+    kind : {'white', 'flat', 'sample'}
+    full : bool
+        The lit EIs fill the objective pupil.
+    evidence : dict
+    """
     ok = np.isfinite(b)
     bb = b[ok] - np.percentile(b[ok], 5)
     n_lit = int(np.count_nonzero(bb > 0.25 * bb.max()))

@@ -92,7 +92,22 @@ class Candidates:
 def find_disks(img: np.ndarray, pitch: float, radius: float) -> Candidates:
     """Rough centres of the EI disks of about ``radius`` px on a lattice of about ``pitch`` px.
 
-    Raises SsdpcError when no disk stands out of the noise."""
+    Raises SsdpcError when no disk stands out of the noise.
+
+    Parameters
+    ----------
+    img : ndarray, float, (H, W)
+        The frame, camera units, dark level removed.
+    pitch : float
+        Expected lenslet pitch, px.
+    radius : float
+        Expected EI radius, px.
+
+    Returns
+    -------
+    Candidates
+        Rough centres (x, y) px and their strengths.
+    """
     from skimage.feature import peak_local_max
 
     b = max(1, int(pitch // 40))
@@ -157,7 +172,25 @@ def rim_circle(img: np.ndarray, c0, radius: float, reach: float = 0.25, neighbou
     not used: there the neighbour's rim and skirt would pull the edge. Weak edges (below
     a quarter of the median) are dropped; a circle is fitted with a Cauchy loss, points
     beyond 3 robust sigmas are rejected and the circle is refitted by least squares.
-    None when too few rim points agree."""
+    None when too few rim points agree.
+
+    Parameters
+    ----------
+    img : ndarray, float, (H, W)
+        The frame, camera units, dark level removed.
+    c0 : array_like, (2,)
+        Start centre (x, y), px.
+    radius : float
+        Expected radius R, px.
+    reach : float
+        Search range about R, as a fraction of R.
+    neighbours : ndarray, (N, 2), optional
+        Centres (x, y) px of the neighbouring EIs.
+
+    Returns
+    -------
+    Circle or None
+    """
     c0 = np.asarray(c0, float)
     n_ray = int(np.clip(2 * math.pi * radius / 1.5, 32, 360))
     phi = np.arange(n_ray) * (2 * math.pi / n_ray)
@@ -257,7 +290,26 @@ def fit_rim(img, circle: Circle, neighbours, delta: float, dark: float) -> RimFi
     Pixels on rays that ``rim_circle`` rejected (a notch, dust, content on the rim) and
     pixels within R + δ of a neighbouring EI centre (``neighbours`` (N, 2)) are left out;
     after a first fit, pixels beyond 5 robust sigmas are dropped and the fit repeated.
-    None when the fit does not converge near the circle."""
+    None when the fit does not converge near the circle.
+
+    Parameters
+    ----------
+    img : ndarray, float, (H, W)
+        The frame, camera units, dark level removed.
+    circle : Circle
+        From :func:`rim_circle`.
+    neighbours : ndarray, (N, 2)
+        Neighbouring EI centres (x, y), px.
+    delta : float
+        Half width δ of the annulus, px.
+    dark : float
+        Level outside the EIs, camera units.
+
+    Returns
+    -------
+    RimFit or None
+        Centre (x, y) px, radius px, edge width px and the centre's standard error.
+    """
     c0, r0 = circle.centre, circle.radius
     H, W = img.shape
     x0, x1 = int(max(c0[0] - r0 - delta - 1, 0)), int(min(c0[0] + r0 + delta + 2, W))

@@ -33,9 +33,33 @@ class AffineLattice:
     cell: np.ndarray = field(default_factory=lambda: np.eye(2))  # the unit cell C, in pitches
 
     def centres(self, n) -> np.ndarray:
+        """EI centres of lattice indices.
+
+        Parameters
+        ----------
+        n : array_like, (..., 2)
+            Lattice indices (col, row).
+
+        Returns
+        -------
+        ndarray, (..., 2)
+            (x, y), px.
+        """
         return self.origin + np.asarray(n, float) @ self.M.T
 
     def index(self, xy) -> np.ndarray:
+        """Lattice indices of sensor positions (the inverse of :meth:`centres`).
+
+        Parameters
+        ----------
+        xy : array_like, (..., 2)
+            Sensor positions (x, y), px.
+
+        Returns
+        -------
+        ndarray, (..., 2)
+            Fractional lattice indices (col, row).
+        """
         return np.linalg.solve(self.M, (np.asarray(xy, float) - self.origin).T).T
 
     @property
@@ -83,7 +107,27 @@ def fit_affine(xy, n, flip, weights=None, cell=None) -> tuple[AffineLattice, np.
 
     With ``MIN_AFFINE`` or more centres the lattice is affine (6 parameters); with fewer
     it is the array's ideal lattice (origin, pitch, rotation: x = ox + α n'x − β n'y,
-    y = oy + β n'x + α n'y with n' = F C n), which extrapolates safely to the dark lenslets."""
+    y = oy + β n'x + α n'y with n' = F C n), which extrapolates safely to the dark lenslets.
+
+    Parameters
+    ----------
+    xy : ndarray, (K, 2)
+        Centres (x, y), px.
+    n : ndarray, (K, 2)
+        Their indices (col, row).
+    flip : ndarray, (2, 2)
+        diag(±1, ±1) of the camera's mirroring.
+    weights : ndarray, (K,), optional
+        1/σ² of each centre.
+    cell : ndarray, (2, 2), optional
+        Unit cell in pitches (square by default).
+
+    Returns
+    -------
+    lattice : AffineLattice
+    residuals : ndarray, (K, 2)
+        px.
+    """
     xy, n = np.asarray(xy, float), np.asarray(n, float)
     cell = np.eye(2) if cell is None else np.asarray(cell, float)
     w = np.sqrt(np.ones(len(xy)) if weights is None else np.asarray(weights, float))
@@ -145,7 +189,27 @@ def assign(xy, strength, pitch0, flip, cell=None) -> tuple[AffineLattice, np.nda
     affine lattice is fitted and the indices rounded again from it until they settle, so
     a shear or unequal axes cannot shift an index far from the reference. The centres on
     the lattice must carry 70 % of the detection ``strength``. Returns the lattice, the
-    indices (K', 2) and a mask (K,) of the centres on it."""
+    indices (K', 2) and a mask (K,) of the centres on it.
+
+    Parameters
+    ----------
+    xy : ndarray, (K, 2)
+        Detected centres (x, y), px.
+    strength : ndarray, (K,)
+        Detection strength of each.
+    pitch0 : float
+        Expected pitch, px.
+    flip : ndarray, (2, 2)
+        diag(±1, ±1) of the camera's mirroring.
+    cell : ndarray, (2, 2), optional
+        Unit cell in pitches.
+
+    Returns
+    -------
+    lattice : AffineLattice
+    indices : ndarray, int, (K', 2)
+    on_lattice : ndarray, bool, (K,)
+    """
     xy = np.asarray(xy, float)
     if len(xy) < MIN_EIS:
         raise SsdpcError(

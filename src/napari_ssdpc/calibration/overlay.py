@@ -13,7 +13,22 @@ from napari_ssdpc.files import atomic_write
 
 def overlay_png(frame, calibration: Calibration, path, *, dpi: int = 110) -> Path:
     """PNG of the frame with the detected EI circles, (row, col) labels and the optical
-    axis (red +), cropped to the lenslets in the pupil. Written atomically."""
+    axis (red +), cropped to the lenslets in the pupil. Written atomically.
+
+    Parameters
+    ----------
+    frame : array_like, (H, W)
+        The frame calibrated on.
+    calibration : Calibration
+    path : str or Path
+        The PNG to write.
+    dpi : int
+        Resolution of the figure.
+
+    Returns
+    -------
+    Path
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from matplotlib.patches import Circle

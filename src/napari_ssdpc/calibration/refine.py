@@ -32,7 +32,25 @@ def all_rims(img, lat: AffineLattice, circles, n_idx):
     neighbours' touching zones (the lattice now says where they are); cells the detection
     missed (dim EIs at the pupil edge) count when their rim is at least 5 % as steep
     as the median rim. Returns the circles, their indices (K, 2) and whether each rim is
-    at least a quarter as steep as the median (bright enough to place its EI on its own)."""
+    at least a quarter as steep as the median (bright enough to place its EI on its own).
+
+    Parameters
+    ----------
+    img : ndarray, float, (H, W)
+        The frame, dark level removed.
+    lat : AffineLattice
+        The first lattice.
+    circles : list of Circle
+        The detected disks' circles.
+    n_idx : ndarray, (K, 2)
+        Their lattice indices.
+
+    Returns
+    -------
+    circles : list of Circle
+    indices : ndarray, (K', 2)
+    bright : ndarray, bool, (K',)
+    """
     r_med = float(np.median([c.radius for c in circles]))
     edge_med = float(np.median([c.edge for c in circles]))
     found = {tuple(int(v) for v in n): c for c, n in zip(circles, n_idx)}
@@ -61,7 +79,29 @@ def all_rims(img, lat: AffineLattice, circles, n_idx):
 def refine_centres(img, lat: AffineLattice, circles, n_idx, dark):
     """Sub-pixel rim fit of every EI; falls back to its robust circle.
 
-    Returns centres (K, 2), σ (K,), radii (K,) and whether the rim fit held (K,)."""
+    Returns centres (K, 2), σ (K,), radii (K,) and whether the rim fit held (K,).
+
+    Parameters
+    ----------
+    img : ndarray, float, (H, W)
+        The frame, dark level removed.
+    lat : AffineLattice
+    circles : list of Circle
+    n_idx : ndarray, (K, 2)
+        Lattice indices of the circles.
+    dark : float
+        Level outside the EIs.
+
+    Returns
+    -------
+    centres : ndarray, (K, 2)
+        (x, y), px.
+    sigma : ndarray, (K,)
+        Standard errors, px.
+    radii : ndarray, (K,)
+        px.
+    held : ndarray, bool, (K,)
+    """
     r_med = float(np.median([c.radius for c in circles]))
     first = [
         fit_rim(img, c, lat.centres(n + _OFFSETS), float(np.clip(0.25 * r_med, 2, 12)), dark)
@@ -91,7 +131,23 @@ def outshone(img, xy, n, radius):
     """EIs whose rim a neighbour's skirt pulls, so that the lattice places them better:
     those dimmer than 0.85 x their brightest neighbour (the edge of the pupil) and, for
     small EIs (radius under ``SMALL_EI_PX``), also those with a neighbour dimmer than 0.85 x
-    themselves (the outer ring of lit EIs)."""
+    themselves (the outer ring of lit EIs).
+
+    Parameters
+    ----------
+    img : ndarray, float, (H, W)
+        The frame, dark level removed.
+    xy : ndarray, (K, 2)
+        EI centres (x, y), px.
+    n : ndarray, (K, 2)
+        Lattice indices.
+    radius : float
+        EI radius, px.
+
+    Returns
+    -------
+    ndarray, bool, (K,)
+    """
     b = ei_brightness(img, xy, radius, 0.5)
     level = {tuple(int(v) for v in k): float(v) for k, v in zip(n, b)}
     out = np.zeros(len(xy), bool)
@@ -106,7 +162,32 @@ def outshone(img, xy, n, radius):
 def fit_lattice(xy, n, sig, pitch, flip, usable, cell):
     """Affine lattice through the usable measured centres (weights 1/σ²), without outliers.
 
-    Returns the lattice, the residuals (K, 2) and a mask of the trusted centres."""
+    Returns the lattice, the residuals (K, 2) and a mask of the trusted centres.
+
+    Parameters
+    ----------
+    xy : ndarray, (K, 2)
+        Centres (x, y), px.
+    n : ndarray, (K, 2)
+        Lattice indices.
+    sig : ndarray, (K,)
+        Standard errors, px.
+    pitch : float
+        px.
+    flip : ndarray, (2, 2)
+        diag(±1, ±1) of the camera's mirroring.
+    usable : ndarray, bool, (K,)
+        Centres that may fix the lattice.
+    cell : ndarray, (2, 2)
+        Unit cell in pitches.
+
+    Returns
+    -------
+    lattice : AffineLattice
+    residuals : ndarray, (K, 2)
+        px.
+    trusted : ndarray, bool, (K,)
+    """
     w = 1.0 / np.maximum(sig, 2e-4 * pitch) ** 2
     trusted = usable.copy() if usable.sum() >= MIN_EIS else np.ones(len(xy), bool)
     lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted], cell)
@@ -130,7 +211,28 @@ def leave_one_out(xy, n, w, flip, cell, trusted, pitch):
     """Few EIs fix a similarity lattice with little redundancy, so a median test cannot see one
     pulled rim. Fit without each centre in turn; where leaving one out makes the others agree
     (their scatter, per degree of freedom) and the others predict it worse than ``LOO_OUTLIER``
-    of the pitch and 4 x that scatter, drop it, and look again."""
+    of the pitch and 4 x that scatter, drop it, and look again.
+
+    Parameters
+    ----------
+    xy : ndarray, (K, 2)
+        Centres (x, y), px.
+    n : ndarray, (K, 2)
+        Lattice indices.
+    w : ndarray, (K,)
+        Weights 1/σ².
+    flip : ndarray, (2, 2)
+    cell : ndarray, (2, 2)
+    trusted : ndarray, bool, (K,)
+        The centres trusted so far.
+    pitch : float
+        px.
+
+    Returns
+    -------
+    ndarray, bool, (K,)
+        The centres still trusted.
+    """
     idx = np.flatnonzero(trusted)
     while len(idx) > MIN_EIS:
         err, scatter = np.empty(len(idx)), np.empty(len(idx))

@@ -116,7 +116,19 @@ class Calibration:
         return out
 
     def check_frame(self, frame, name="frame") -> np.ndarray:
-        """Validate a frame against this calibration; return it as float32."""
+        """Validate a frame against this calibration; return it as float32.
+
+        Parameters
+        ----------
+        frame : array_like, (H, W)
+            Camera units.
+        name : str
+            How messages name it.
+
+        Returns
+        -------
+        ndarray, float32, (H, W)
+        """
         img = validated(frame, name)
         if img.shape != tuple(self.frame_shape):
             raise SsdpcError(
@@ -128,6 +140,13 @@ class Calibration:
 
     # ------------------------------------------------------------- JSON
     def to_dict(self) -> dict:
+        """The calibration as plain values (the versioned JSON).
+
+        Returns
+        -------
+        dict
+            JSON-ready: format and version, grid, EI radius (px), kind, residual and the lenslet table.
+        """
         return {
             "format": CALIBRATION_FORMAT,
             "version": self.version,
@@ -151,6 +170,19 @@ class Calibration:
 
     @classmethod
     def from_dict(cls, d: dict, source: str = "calibration") -> Calibration:
+        """A calibration from its JSON values; a one-line error names what is wrong.
+
+        Parameters
+        ----------
+        d : dict
+            As written by :meth:`to_dict`.
+        source : str
+            How messages name where it came from.
+
+        Returns
+        -------
+        Calibration
+        """
         if not isinstance(d, dict) or d.get("format") != CALIBRATION_FORMAT:
             raise SsdpcError(f"{source}: not a napari-ssdpc calibration file; run `ssdpc calibrate` on a white frame")
         if d.get("version") != CALIBRATION_VERSION:
@@ -201,7 +233,16 @@ class Calibration:
             ) from None
 
     def to_json(self, path) -> Path:
-        """Write the versioned JSON atomically (a failure never leaves a half file)."""
+        """Write the versioned JSON atomically (a failure never leaves a half file).
+
+        Parameters
+        ----------
+        path : str or Path
+
+        Returns
+        -------
+        Path
+        """
         path = Path(path)
         text = json.dumps(self.to_dict(), indent=1)
         with atomic_write(path) as tmp:
@@ -210,6 +251,16 @@ class Calibration:
 
     @classmethod
     def from_json(cls, path) -> Calibration:
+        """Read a calibration JSON written by :meth:`to_json`.
+
+        Parameters
+        ----------
+        path : str or Path
+
+        Returns
+        -------
+        Calibration
+        """
         path = Path(path)
         if not path.is_file():
             raise SsdpcError(f"calibration file not found: {path} (run `ssdpc calibrate WHITE.tif -o {path.name}`)")
@@ -247,7 +298,18 @@ class Views:
 
 # ------------------------------------------------------------------ validation
 def validated(frame, name="frame") -> np.ndarray:
-    """The frame as a float32 (H, W) array; one-line SsdpcError for anything else."""
+    """The frame as a float32 (H, W) array; one-line SsdpcError for anything else.
+
+    Parameters
+    ----------
+    frame : array_like
+    name : str
+        How messages name it.
+
+    Returns
+    -------
+    ndarray, float32, (H, W)
+    """
     a = np.asarray(frame)
     if a.dtype.kind not in "uif":
         raise SsdpcError(

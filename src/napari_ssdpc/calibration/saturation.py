@@ -13,7 +13,19 @@ __all__ = ["saturated_fraction", "warn_saturation"]
 
 def saturated_fraction(frame, level=None) -> float:
     """Fraction of pixels at the top of the range: ``level``, else the full scale of an
-    integer frame (2**b − 1 for a b-bit camera in a 16-bit container, b in 8..16)."""
+    integer frame (2**b − 1 for a b-bit camera in a 16-bit container, b in 8..16).
+
+    Parameters
+    ----------
+    frame : array_like, (H, W)
+        Camera units.
+    level : float, optional
+        The saturation level.
+
+    Returns
+    -------
+    float
+    """
     a = np.asarray(frame)
     top = level
     if top is None:
@@ -27,7 +39,23 @@ def saturated_fraction(frame, level=None) -> float:
 
 
 def warn_saturation(frame, name="frame", level=None, threshold=1e-4) -> float:
-    """Warn (SsdpcWarning) with the saturated fraction when it exceeds ``threshold``."""
+    """Warn (SsdpcWarning) with the saturated fraction when it exceeds ``threshold``.
+
+    Parameters
+    ----------
+    frame : array_like, (H, W)
+    name : str
+        How the warning names it.
+    level : float, optional
+        The saturation level.
+    threshold : float
+        Largest fraction without a warning.
+
+    Returns
+    -------
+    float
+        The saturated fraction.
+    """
     frac = saturated_fraction(frame, level)
     if frac > threshold:
         warnings.warn(

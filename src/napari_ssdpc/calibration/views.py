@@ -40,6 +40,20 @@ def extract_views(frame, calibration: Calibration, size=None, *, order: int = 1)
     ``centre_k + matrix @ (j − j0, i − i0) * step`` (``Grid.object_to_sensor``), so the
     rotation/flip of the camera is undone and an in-focus object point at (x, y) µm
     lands at view pixel (x, y) / object_pixel_um from the centre.
+
+    Parameters
+    ----------
+    frame : array_like, (H, W)
+        Raw frame, camera units.
+    calibration : Calibration
+    size : int, optional
+        View size (h = w), px; default the EI diameter on the object grid.
+    order : int
+        Spline order of the resampling.
+
+    Returns
+    -------
+    Views
     """
     cal = calibration
     img = cal.check_frame(frame)
@@ -69,7 +83,21 @@ def extract_views(frame, calibration: Calibration, size=None, *, order: int = 1)
 
 def insert_views(views: Views, calibration: Calibration, *, order: int = 1, fill: float = 0.0) -> np.ndarray:
     """Inverse of :func:`extract_views`: paint each view back inside its iris disk on the
-    sensor (float32 frame of the calibration's shape; ``fill`` elsewhere)."""
+    sensor (float32 frame of the calibration's shape; ``fill`` elsewhere).
+
+    Parameters
+    ----------
+    views : Views
+    calibration : Calibration
+    order : int
+        Spline order of the resampling.
+    fill : float
+        Value outside the iris disks.
+
+    Returns
+    -------
+    ndarray, float32, (H, W)
+    """
     cal = calibration
     H, W = cal.frame_shape
     out = np.full((H, W), fill, np.float32)

@@ -44,7 +44,14 @@ def _help(field: str) -> str:
 
 
 def add_reconstruction_options(parser: argparse.ArgumentParser) -> None:
-    """Add --config, --z and one flag per reconstruction setting (see :data:`FLAGS`)."""
+    """Add --config, --z and one flag per reconstruction setting (see :data:`FLAGS`).
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        The ``reconstruct`` (or ``bench``) sub-command's parser; choices, defaults and help come
+        from :class:`~napari_ssdpc.settings.reconstruction.ReconstructionSettings`.
+    """
     fields = ReconstructionSettings.model_fields
     parser.add_argument(
         "--config", help="run configuration YAML (optics + reconstruction sections), e.g. saved by napari"

@@ -35,6 +35,7 @@ class FrameSource:
 
     @property
     def name(self) -> str:
+        """The file's absolute path, or 'array' for frames in memory."""
         return "array" if self.path is None else str(self.path.resolve())
 
     @property

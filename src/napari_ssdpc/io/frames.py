@@ -334,7 +334,24 @@ def create_ome_zarr(
 
 
 def read_ome_zarr(path, name: str = "ri"):
-    """(data, voxel_um, attrs) of an image group written by :func:`create_ome_zarr`."""
+    """An image group written by :func:`create_ome_zarr`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.zarr`` store.
+    name : str
+        The image group ('ri', 'phase', ...).
+
+    Returns
+    -------
+    data : zarr.Array
+        Level '0', e.g. (t, z, y, x).
+    voxel_um : tuple of float
+        (dz, dy, dx), µm.
+    attrs : dict
+        Our metadata (``napari_ssdpc`` attribute).
+    """
     import zarr
 
     path = Path(path)

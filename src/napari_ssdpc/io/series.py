@@ -46,6 +46,17 @@ class Recipe:
     flat: np.ndarray | None = None
 
     def build(self, progress=None):
+        """The Reconstructor of this recipe (operators built now).
+
+        Parameters
+        ----------
+        progress : callable, optional
+            ``progress(done, total, label)`` while the operators are built.
+
+        Returns
+        -------
+        Reconstructor
+        """
         from napari_ssdpc.reconstruction.pipeline import Reconstructor
 
         return Reconstructor(self.optics, self.calibration, flat=self.flat, progress=progress, **self.settings)
@@ -130,8 +141,26 @@ def _check_values(result, t: int) -> None:
 
 
 def process_frame(rec_or_recipe, source: FrameSource, t: int, out, save) -> dict:
-    """Read frame t, reconstruct it, write its chunks and mark it done. Returns its timings.
-    The same function runs serially and on Dask workers."""
+    """Read frame t, reconstruct it, write its chunks and mark it done (serially and on Dask workers).
+
+    Parameters
+    ----------
+    rec_or_recipe : Reconstructor or Recipe
+        A built Reconstructor, or a Recipe (a worker builds it once and keeps it).
+    source : FrameSource
+        The raw frames (t, y, x).
+    t : int
+        Frame index.
+    out : str or Path
+        The OME-Zarr store (made by :func:`~napari_ssdpc.io.store.open_store`).
+    save : list of str
+        Quantities written beside RI (registry names).
+
+    Returns
+    -------
+    dict
+        ``t`` and the seconds spent reading, reconstructing and writing (plus the solver's timings).
+    """
     rec = _reconstructor(rec_or_recipe) if isinstance(rec_or_recipe, Recipe) else rec_or_recipe
     t0 = time.perf_counter()
     frame = source[t]
@@ -146,6 +175,24 @@ def process_frame(rec_or_recipe, source: FrameSource, t: int, out, save) -> dict
 # ------------------------------------------------------------------- driver
 @dataclass
 class SeriesReport:
+    """What a series run did.
+
+    Attributes
+    ----------
+    frames : int
+        Frames in the series.
+    written : int
+        Frames reconstructed and written by this run.
+    skipped : int
+        Frames already done by an earlier run (resumed).
+    seconds : float
+        Wall time of this run's frames, s.
+    build_seconds : float
+        Time to build the operators, s.
+    timings : list of dict
+        Per frame, as :func:`process_frame` returns them.
+    """
+
     frames: int
     written: int
     skipped: int
@@ -155,6 +202,7 @@ class SeriesReport:
 
     @property
     def frames_per_second(self) -> float:
+        """Frames written per second of this run (NaN when none took time)."""
         return self.written / self.seconds if self.seconds > 0 else float("nan")
 
 
@@ -172,13 +220,38 @@ def reconstruct_series(
     stop_after: int | None = None,
     on_frame=None,
 ) -> SeriesReport:
-    """Stream ``source`` (a FrameSource, TIFF path or (t, y, x) array) through the recipe's
-    Reconstructor into the OME-Zarr ``out``; see the module docstring.
+    """Stream a series through the recipe's Reconstructor into an OME-Zarr store (see the module notes).
 
-    ``rec``: an already built Reconstructor of this recipe (serial runs only). ``stop_after``:
-    process at most this many pending frames (a partial run, for tests and previews).
-    ``on_frame(t, done, total)``: called after each frame is written (e.g. the napari widget's
-    progress; raising there stops the run between frames, and the store stays resumable)."""
+    Parameters
+    ----------
+    source : FrameSource, str, Path or array
+        The raw frames (t, y, x): a TIFF path, a NumPy or dask array.
+    out : str or Path
+        The ``.zarr`` store; an existing one of the same input and settings is resumed.
+    recipe : Recipe
+        What builds the Reconstructor.
+    save : iterable of str
+        Quantities written beside RI (registry names).
+    meta : dict, optional
+        Metadata stored with every image.
+    workers : int, optional
+        Local Dask worker processes.
+    scheduler : str, optional
+        Address of a running Dask scheduler.
+    progress : bool
+        Show a tqdm bar.
+    rec : Reconstructor, optional
+        Already built from this recipe (serial runs only).
+    stop_after : int, optional
+        Process at most this many pending frames (a partial run, for tests and previews).
+    on_frame : callable, optional
+        ``on_frame(t, done, total)`` after each frame is written (serial runs; raising there stops
+        the run between frames, and the store stays resumable).
+
+    Returns
+    -------
+    SeriesReport
+    """
     source = source if isinstance(source, FrameSource) else FrameSource(source)
     out = Path(out)
     if not out.parent.is_dir():

@@ -37,7 +37,25 @@ class Grid:
     @classmethod
     def nominal(cls, optics: Optics, axis_px=None, axis_offset_px=(0.0, 0.0), rotation_deg=0.0, pitch_px=None) -> Grid:
         """Grid of an ideal instrument. ``axis_offset_px`` is the optical axis position
-        relative to the lattice vertex, in pixels along the lattice axes."""
+        relative to the lattice vertex, in pixels along the lattice axes.
+
+        Parameters
+        ----------
+        optics : Optics
+            Pitch, sensor size and flips of the instrument.
+        axis_px : (float, float), optional
+            Optical axis on the sensor (x, y), px; default the sensor's centre.
+        axis_offset_px : (float, float)
+            Axis relative to the reference vertex along the lattice axes, px.
+        rotation_deg : float
+            MLA rotation on the sensor, degrees.
+        pitch_px : float, optional
+            Lenslet pitch on the sensor, px; default the optics'.
+
+        Returns
+        -------
+        Grid
+        """
         if axis_px is None:
             axis_px = ((optics.width_px - 1) / 2.0, (optics.height_px - 1) / 2.0)
         g = cls(
@@ -62,7 +80,18 @@ class Grid:
         return rot @ flip
 
     def lattice_px(self, row, col) -> np.ndarray:
-        """Sensor position (x, y) of the lenslet centre(s) with lattice index (row, col)."""
+        """Sensor position (x, y) of the lenslet centre(s) with lattice index (row, col).
+
+        Parameters
+        ----------
+        row, col : int or array_like of int
+            Lattice indices (broadcast together).
+
+        Returns
+        -------
+        ndarray, float64, (..., 2)
+            (x, y) in sensor pixels.
+        """
         row, col = np.broadcast_arrays(np.asarray(row, float), np.asarray(col, float))
         d = np.stack([col + 0.5, row + 0.5], axis=-1) @ (self.pitch_px * lattice_cell(self.lattice)).T
         return np.asarray(self.vertex_px) + d @ self.matrix.T
@@ -73,20 +102,61 @@ class Grid:
         return np.linalg.solve(self.matrix, d)
 
     def axis_offset_um(self, optics: Optics) -> np.ndarray:
-        """Same offset in µm on the MLA (uses the measured pitch as the length scale)."""
+        """Same offset in µm on the MLA (uses the measured pitch as the length scale).
+
+        Parameters
+        ----------
+        optics : Optics
+
+        Returns
+        -------
+        ndarray, (2,)
+            Offset along the lattice axes, µm on the MLA.
+        """
         return self.axis_offset_px() * optics.pitch_um / self.pitch_px
 
     def lenslets(self, optics: Optics, min_fraction: float = 1e-3) -> list[Lenslet]:
-        """Lenslets overlapping the pupil for this axis position."""
+        """Lenslets overlapping the pupil for this axis position.
+
+        Parameters
+        ----------
+        optics : Optics
+        min_fraction : float
+            Smallest part of a lenslet inside the pupil to count it.
+
+        Returns
+        -------
+        list of Lenslet
+        """
         return optics.lenslets(self.axis_offset_um(optics), min_fraction=min_fraction)
 
     def object_to_sensor(self, lenslet: Lenslet, xy_um, optics: Optics) -> np.ndarray:
-        """Sensor position of an in-focus object point (x, y) µm in the EI of ``lenslet``."""
+        """Sensor position of an in-focus object point (x, y) µm in the EI of ``lenslet``.
+
+        Parameters
+        ----------
+        lenslet : Lenslet
+        xy_um : array_like, (..., 2)
+            Object position (x, y), µm from the optical axis.
+        optics : Optics
+
+        Returns
+        -------
+        ndarray, (..., 2)
+            (x, y) on the sensor, px.
+        """
         scale = optics.m_ei / optics.pixel_um * self.pitch_px / optics.pitch_px
         centre = self.lattice_px(lenslet.row, lenslet.col)
         return centre + (np.asarray(xy_um, dtype=float) * scale) @ self.matrix.T
 
     def to_dict(self) -> dict:
+        """The grid as plain values (the calibration JSON).
+
+        Returns
+        -------
+        dict
+            JSON-ready: axis, vertex (px), pitch (px), rotation (degrees), flips and lattice.
+        """
         return {
             "axis_px": list(self.axis_px),
             "vertex_px": list(self.vertex_px),
@@ -99,6 +169,17 @@ class Grid:
 
     @classmethod
     def from_dict(cls, d: dict) -> Grid:
+        """The grid of a calibration JSON.
+
+        Parameters
+        ----------
+        d : dict
+            As written by :meth:`to_dict`.
+
+        Returns
+        -------
+        Grid
+        """
         return cls(
             xy_pair(d["axis_px"]),
             xy_pair(d["vertex_px"]),
@@ -111,6 +192,15 @@ class Grid:
 
 
 def xy_pair(values) -> tuple[float, float]:
-    """(x, y) as two floats."""
+    """(x, y) as two floats.
+
+    Parameters
+    ----------
+    values : sequence of two numbers
+
+    Returns
+    -------
+    (float, float)
+    """
     x, y = values
     return float(x), float(y)

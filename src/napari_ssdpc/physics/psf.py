@@ -77,7 +77,20 @@ class ReferencePSF:
 
     def windows(self, shape):
         """EI windows (Z, K, h, w) around the pixel nearest each EI centre, and the sub-pixel
-        offsets (K, 2) (x, y) of the window centre from the EI centre, in px (for LensletPSF)."""
+        offsets (K, 2) (x, y) of the window centre from the EI centre, in px (for LensletPSF).
+
+        Parameters
+        ----------
+        shape : (int, int)
+            Window size (h, w), px.
+
+        Returns
+        -------
+        windows : ndarray, (Z, K, h, w)
+            The reference PSF images cut around each EI.
+        offsets : ndarray, int, (K, 2)
+            (x, y) of each window centre minus its EI centre, px.
+        """
         h, w = shape
         c = self.centres_px - np.asarray(self.origin_px)
         ic = np.rint(c).astype(int)
@@ -308,19 +321,47 @@ class LensletPSF:
         return np.array([ln.fraction for ln in self.lenslets])
 
     def shift_um(self, z) -> np.ndarray:
-        """Parallax z·<u/η>_k (K, 2) (x, y) in object µm: toward the optical axis for z > 0."""
+        """Parallax z·<u/η>_k (K, 2) (x, y) in object µm: toward the optical axis for z > 0.
+
+        Parameters
+        ----------
+        z : float
+            Depth, µm (z > 0: farther from the objective).
+
+        Returns
+        -------
+        ndarray, float64, (K, 2)
+        """
         return float(z) * self.tilt
 
     # ---------------------------------------------------------------- blurs
     def blur(self, z) -> np.ndarray:
-        """B_k(r; z): the kernels with the parallax removed, (K, S, S) float32, centre at S//2."""
+        """B_k(r; z): the kernels with the parallax removed, (K, S, S) float32, centre at S//2.
+
+        Parameters
+        ----------
+        z : float
+            Depth, µm.
+
+        Returns
+        -------
+        ndarray, float32, (K, S, S)
+        """
         key = float(z)
         if key not in self._cache:
             self._cache[key] = self._compute_blur(key)
         return self._cache[key]
 
     def precompute(self, z_values, progress=None) -> None:
-        """Compute and cache the blurs of these depths; ``progress(done, total)`` after each."""
+        """Compute and cache the blurs of these depths; ``progress(done, total)`` after each.
+
+        Parameters
+        ----------
+        z_values : iterable of float
+            Depths, µm.
+        progress : callable, optional
+            ``progress(done, total)``.
+        """
         zs = np.atleast_1d(z_values)
         for i, z in enumerate(zs):
             self.blur(z)
@@ -348,7 +389,20 @@ class LensletPSF:
     # ------------------------------------------------------------- operators
     def otf(self, z, fft_shape) -> np.ndarray:
         """OTFs for a batched real-FFT convolution: (K, P, Q//2+1) complex64 for a scalar z,
-        (K, Z, P, Q//2+1) for a sequence; kernel centre at index 0 (as deconvolution.kernels_to_otf)."""
+        (K, Z, P, Q//2+1) for a sequence; kernel centre at index 0 (as deconvolution.kernels_to_otf).
+
+        Parameters
+        ----------
+        z : float or sequence of float
+            Depth(s), µm.
+        fft_shape : (int, int)
+            (P, Q) of the padded real FFT, px.
+
+        Returns
+        -------
+        ndarray, complex64
+            (K, P, Q//2+1) or (K, Z, P, Q//2+1).
+        """
         fft_shape = tuple(int(n) for n in fft_shape)
         if np.ndim(z) == 0:
             return self._otf_one(float(z), fft_shape)
@@ -377,7 +431,18 @@ class LensletPSF:
         return otf.astype(np.complex64, copy=False)
 
     def kernels(self, z) -> np.ndarray:
-        """EI-window kernels (K, h, w) float32 for a scalar z, (K, Z, h, w) for a sequence."""
+        """EI-window kernels (K, h, w) float32 for a scalar z, (K, Z, h, w) for a sequence.
+
+        Parameters
+        ----------
+        z : float or sequence of float
+            Depth(s), µm.
+
+        Returns
+        -------
+        ndarray, float32
+            (K, h, w) or (K, Z, h, w): each lenslet's share of a point's light per sensor pixel.
+        """
         if np.ndim(z) != 0:
             return np.stack([self.kernels(float(v)) for v in z], axis=1)
         h, w = self.shape

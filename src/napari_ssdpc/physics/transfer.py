@@ -227,7 +227,18 @@ class LensletSetup:
         self.i0 = _binary_background(self.src, self.pup, self.norm)
 
     def band(self, zs):
-        """(H_abs, H_phase) (Z, K, my, mx) on the band grid for the depths ``zs`` (1D)."""
+        """(H_abs, H_phase) (Z, K, my, mx) on the band grid for the depths ``zs`` (1D).
+
+        Parameters
+        ----------
+        zs : ndarray, (Z,)
+            Depths, µm.
+
+        Returns
+        -------
+        h_abs, h_phase : ndarray, complex64, (Z, K, my, mx)
+            Absorption and phase transfer functions (paper Eqs. 2-4), unshifted FFT order.
+        """
         r, m_out = self.r, self.m_out
         fine = tuple(m * r for m in m_out)
         h_abs, h_phase = weak_object_transfer_functions(self.src, self.pup, zs, self.eta, fine, self.norm)
@@ -238,7 +249,18 @@ class LensletSetup:
         return h_abs, h_phase
 
     def embed(self, h):
-        """Band grid -> output grid (zeros beyond 2ρ, where the WOTF vanishes)."""
+        """Band grid -> output grid (zeros beyond 2ρ, where the WOTF vanishes).
+
+        Parameters
+        ----------
+        h : ndarray, (..., my, mx)
+            Transfer functions on the band grid.
+
+        Returns
+        -------
+        ndarray, complex64, (..., ny, nx)
+            On the image grid, unshifted FFT order.
+        """
         return h if h.shape[-2:] == self.shape else _embed(h, self.shape)
 
 

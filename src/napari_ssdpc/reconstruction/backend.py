@@ -43,15 +43,35 @@ class Backend:
 
     @property
     def is_gpu(self) -> bool:
+        """Whether arrays live on a GPU (CuPy)."""
         return self.device == "gpu"
 
     # ----------------------------------------------------------- transfers
     def asarray(self, a, dtype=None):
-        """``a`` on this device (no copy when it is already there with that dtype)."""
+        """``a`` on this device (no copy when it is already there with that dtype).
+
+        Parameters
+        ----------
+        a : array_like
+        dtype : dtype, optional
+
+        Returns
+        -------
+        ndarray (NumPy or CuPy)
+        """
         return self.xp.asarray(a, dtype=dtype)
 
     def to_host(self, a):
-        """A NumPy array of ``a`` (a device -> host copy on the GPU)."""
+        """A NumPy array of ``a`` (a device -> host copy on the GPU).
+
+        Parameters
+        ----------
+        a : ndarray (NumPy or CuPy)
+
+        Returns
+        -------
+        numpy.ndarray
+        """
         if self.is_gpu and not isinstance(a, np.ndarray):
             return self.xp.asnumpy(a)
         return np.asarray(a)
@@ -66,21 +86,95 @@ class Backend:
         return {"workers": self.workers} if not self.is_gpu else {}
 
     def rfft2(self, a, s=None):
+        """Real 2D FFT over the last two axes (threaded on the CPU).
+
+        Parameters
+        ----------
+        a : ndarray, real, (..., P, Q)
+        s : (int, int), optional
+            Padded shape.
+
+        Returns
+        -------
+        ndarray, complex, (..., P, Q//2+1)
+        """
         return self.fft.rfft2(a, s=s, **self._kw())
 
     def irfft2(self, a, s):
+        """Inverse of :meth:`rfft2`.
+
+        Parameters
+        ----------
+        a : ndarray, complex, (..., P, Q//2+1)
+        s : (int, int)
+            Output shape (P, Q).
+
+        Returns
+        -------
+        ndarray, real, (..., P, Q)
+        """
         return self.fft.irfft2(a, s=s, **self._kw())
 
     def rfft(self, a, axis=-1):
+        """Real 1D FFT along ``axis``.
+
+        Parameters
+        ----------
+        a : ndarray, real
+        axis : int
+
+        Returns
+        -------
+        ndarray, complex
+        """
         return self.fft.rfft(a, axis=axis, **self._kw())
 
     def irfft(self, a, n, axis=-1):
+        """Inverse of :meth:`rfft`.
+
+        Parameters
+        ----------
+        a : ndarray, complex
+        n : int
+            Output length.
+        axis : int
+
+        Returns
+        -------
+        ndarray, real
+        """
         return self.fft.irfft(a, n=n, axis=axis, **self._kw())
 
     def fft_(self, a, n=None, axis=-1):
+        """Complex 1D FFT along ``axis``.
+
+        Parameters
+        ----------
+        a : ndarray
+        n : int, optional
+            Transform length.
+        axis : int
+
+        Returns
+        -------
+        ndarray, complex
+        """
         return self.fft.fft(a, n=n, axis=axis, **self._kw())
 
     def ifft(self, a, n=None, axis=-1):
+        """Inverse of :meth:`fft_`.
+
+        Parameters
+        ----------
+        a : ndarray
+        n : int, optional
+            Transform length.
+        axis : int
+
+        Returns
+        -------
+        ndarray, complex
+        """
         return self.fft.ifft(a, n=n, axis=axis, **self._kw())
 
 
@@ -120,7 +214,19 @@ def _gpu() -> Backend:
 
 
 def get_backend(device: str | Backend | None = "cpu", workers: int = -1) -> Backend:
-    """The backend of ``device`` ('cpu' or 'gpu'; a Backend is returned as it is)."""
+    """The backend of ``device`` ('cpu' or 'gpu'; a Backend is returned as it is).
+
+    Parameters
+    ----------
+    device : {'cpu', 'gpu'} or Backend, optional
+        None means 'cpu'.
+    workers : int
+        FFT threads on the CPU (-1: all cores).
+
+    Returns
+    -------
+    Backend
+    """
     if isinstance(device, Backend):
         return device
     device = "cpu" if device is None else str(device).lower()
@@ -145,7 +251,20 @@ def _pool(parts: int) -> ThreadPoolExecutor:
 
 def in_threads(fn, n: int) -> list:
     """``fn(slice)`` over ``range(n)`` cut into one part per core, in threads of one shared pool:
-    NumPy's elementwise operations release the GIL, so the parts run side by side."""
+    NumPy's elementwise operations release the GIL, so the parts run side by side.
+
+    Parameters
+    ----------
+    fn : callable
+        ``fn(part)`` for a slice of ``range(n)``.
+    n : int
+        Length of the range.
+
+    Returns
+    -------
+    list
+        ``fn``'s results, one per part, in order.
+    """
     parts = max(1, min(os.cpu_count() or 1, n))
     bounds = np.linspace(0, n, parts + 1).astype(int)
     slices = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])]

@@ -26,12 +26,36 @@ from napari_ssdpc.reconstruction.backend import get_backend
 
 
 def padded_shape(view_shape, kernel_shape):
-    """FFT shape for linear convolution, from scipy.fft.next_fast_len (real FFTs)."""
+    """FFT shape for linear convolution, from scipy.fft.next_fast_len (real FFTs).
+
+    Parameters
+    ----------
+    view_shape, kernel_shape : (int, int)
+        (h, w) of a view and of a kernel, px.
+
+    Returns
+    -------
+    (int, int)
+    """
     return tuple(sfft.next_fast_len(int(a + b - 1), real=True) for a, b in zip(view_shape, kernel_shape))
 
 
 def kernels_to_otf(kernels, fft_shape, workers=-1):
-    """OTFs (K, Z, P, Q//2+1) of centred kernels (K, Z, kh, kw), rfft over the last two axes."""
+    """OTFs (K, Z, P, Q//2+1) of centred kernels (K, Z, kh, kw), rfft over the last two axes.
+
+    Parameters
+    ----------
+    kernels : ndarray, (K, Z, kh, kw)
+        Centred kernels.
+    fft_shape : (int, int)
+        (P, Q).
+    workers : int
+        FFT threads.
+
+    Returns
+    -------
+    ndarray, complex64, (K, Z, P, Q//2+1)
+    """
     kernels = np.asarray(kernels, dtype=np.float32)
     kh, kw = kernels.shape[-2:]
     pad = np.zeros(kernels.shape[:-2] + tuple(fft_shape), np.float32)
@@ -51,12 +75,35 @@ class Band:
 
     @classmethod
     def full(cls, shape) -> Band:
+        """The whole rfft2 spectrum of ``shape``.
+
+        Parameters
+        ----------
+        shape : (int, int)
+            (P, Q).
+
+        Returns
+        -------
+        Band
+        """
         p, q = (int(v) for v in shape)
         return cls((p, q), p, q // 2 + 1)
 
     @classmethod
     def disk(cls, shape, radius) -> Band:
-        """The box around the disk |f| ≤ ``radius`` (cycles per pixel); the full grid if it is larger."""
+        """The box around the disk |f| ≤ ``radius`` (cycles per pixel); the full grid if it is larger.
+
+        Parameters
+        ----------
+        shape : (int, int)
+            (P, Q).
+        radius : float
+            Cycles per pixel.
+
+        Returns
+        -------
+        Band
+        """
         p, q = (int(v) for v in shape)
         r = int(math.floor(radius * p))
         c = int(math.floor(radius * q)) + 1
@@ -67,7 +114,19 @@ class Band:
     @classmethod
     def box(cls, shape, m) -> Band:
         """The rfft2 half of a centred box of m = (my, mx) frequencies (odd; unshifted order
-        −(m−1)/2 … (m−1)/2); the full grid if the box reaches the grid's size."""
+        −(m−1)/2 … (m−1)/2); the full grid if the box reaches the grid's size.
+
+        Parameters
+        ----------
+        shape : (int, int)
+            (P, Q).
+        m : (int, int)
+            (my, mx), odd.
+
+        Returns
+        -------
+        Band
+        """
         p, q = (int(v) for v in shape)
         my, mx = (int(v) for v in m)
         if my >= p or mx >= q:
@@ -76,10 +135,12 @@ class Band:
 
     @property
     def is_full(self) -> bool:
+        """Whether the band is the whole spectrum."""
         return self.r >= self.shape[0]
 
     @property
     def box_shape(self) -> tuple:
+        """(2r+1, ncols): the band's shape."""
         return (self.shape[0] if self.is_full else 2 * self.r + 1, self.ncols)
 
     @property
@@ -88,14 +149,32 @@ class Band:
         return self.box_shape[0] * self.ncols / (self.shape[0] * (self.shape[1] // 2 + 1))
 
     def take(self, spec, xp=np):
-        """The band (..., 2r+1, ncols) of a spectrum (..., P, ncols or more)."""
+        """The band (..., 2r+1, ncols) of a spectrum (..., P, ncols or more).
+
+        Parameters
+        ----------
+        spec : ndarray, complex, (..., P, ≥ ncols)
+        xp : module
+            NumPy or CuPy.
+
+        Returns
+        -------
+        ndarray, complex, (..., 2r+1, ncols)
+        """
         if self.is_full:
             return spec
         r = self.r
         return xp.concatenate((spec[..., : r + 1, : self.ncols], spec[..., -r:, : self.ncols]), axis=-2)
 
     def put(self, out, band) -> None:
-        """Write a band into ``out`` (..., P, ≥ ncols); the rest of ``out`` is left as it is."""
+        """Write a band into ``out`` (..., P, ≥ ncols); the rest of ``out`` is left as it is.
+
+        Parameters
+        ----------
+        out : ndarray, complex, (..., P, ≥ ncols)
+            Written in place.
+        band : ndarray, complex, (..., 2r+1, ncols)
+        """
         if self.is_full:
             out[...] = band
             return
@@ -106,6 +185,18 @@ class Band:
 
 @dataclass
 class RLResult:
+    """What Richardson-Lucy returns.
+
+    Attributes
+    ----------
+    stack : ndarray, float32, (Z, ny, nx)
+        Deconvolved intensity.
+    relative_change : list of float
+        ‖o_{i+1} − o_i‖ / ‖o_i‖ per iteration.
+    stopped : bool
+        ``should_stop()`` asked to stop early.
+    """
+
     stack: np.ndarray  # (Z, ny, nx) deconvolved intensity
     relative_change: list = field(default_factory=list)  # ||o_{i+1} - o_i|| / ||o_i|| per iteration
     stopped: bool = False  # should_stop() asked to stop early
@@ -205,7 +296,16 @@ class MultiViewRL:
         return bk.irfft(half, n=q, axis=-1)
 
     def forward(self, obj):
-        """Σ_z h_{k,z} ⊛ o_z on the padded grid: (Z, P, Q) -> (K, P, Q)."""
+        """Σ_z h_{k,z} ⊛ o_z on the padded grid: (Z, P, Q) -> (K, P, Q).
+
+        Parameters
+        ----------
+        obj : ndarray, float32, (Z, P, Q)
+
+        Returns
+        -------
+        ndarray, float32, (K, P, Q)
+        """
         xp = self.bk.xp
         o = self._spectrum(xp.asarray(obj, dtype=np.float32))  # (Z, *box)
         o = xp.ascontiguousarray(o.reshape(self.z, -1).T)[..., None]  # (F, Z, 1)
@@ -213,7 +313,16 @@ class MultiViewRL:
         return self._image(xp.ascontiguousarray(v.T).reshape((self.k,) + self.band.box_shape))
 
     def adjoint(self, views):
-        """Σ_k h_{k,z} ⋆ r_k (correlation): (K, P, Q) -> (Z, P, Q)."""
+        """Σ_k h_{k,z} ⋆ r_k (correlation): (K, P, Q) -> (Z, P, Q).
+
+        Parameters
+        ----------
+        views : ndarray, float32, (K, P, Q)
+
+        Returns
+        -------
+        ndarray, float32, (Z, P, Q)
+        """
         xp = self.bk.xp
         r = self._spectrum(xp.asarray(views, dtype=np.float32))  # (K, *box)
         r = xp.ascontiguousarray(xp.conj(r).reshape(self.k, -1).T)[:, None, :]  # (F, 1, K)
@@ -222,6 +331,24 @@ class MultiViewRL:
 
     # ------------------------------------------------------------------- RL
     def run(self, views, iterations: int, init=None, progress=None, should_stop=None) -> RLResult:
+        """Richardson-Lucy iterations of the multi-view model (paper Eq. 6).
+
+        Parameters
+        ----------
+        views : ndarray, (K, h, w)
+            Non-negative views, one per lenslet.
+        iterations : int
+        init : ndarray, (Z, h, w), optional
+            Start (default: flat).
+        progress : callable, optional
+            ``progress(done, total, label)`` per iteration.
+        should_stop : callable, optional
+            Checked every iteration; True stops early.
+
+        Returns
+        -------
+        RLResult
+        """
         if iterations < 1:
             raise SsdpcError(f"Richardson-Lucy iterations must be >= 1, got {iterations}")
         views = np.asarray(views, np.float32)

@@ -14,6 +14,19 @@ def dpc_image(i1, i2, eps: float = 1e-6, background=None):
 
     ``background`` replaces the denominator when given (e.g. the z-summed background of
     a deconvolved stack, so that every slice is normalised by the same total intensity).
+
+    Parameters
+    ----------
+    i1, i2 : ndarray
+        The two halves' images (same shape).
+    eps : float
+        Floor of the denominator.
+    background : ndarray, optional
+        Replaces I₁ + I₂.
+
+    Returns
+    -------
+    ndarray, float32
     """
     i1 = np.asarray(i1, dtype=np.float32)
     i2 = np.asarray(i2, dtype=np.float32)
@@ -28,6 +41,20 @@ def tikhonov_phase(dpc, h_phase, alpha: float, workers: int = -1):
     ``h_phase``: matching DPC phase transfer functions (ny, nx) or (..., ny, nx) in
     unshifted FFT order, so that F[dpc_j] = h_phase_j · F[φ].
     φ = F⁻¹{ Σ_j H_j* F[dpc_j] / (Σ_j |H_j|² + α) }.
+
+    Parameters
+    ----------
+    dpc : sequence of ndarray, (..., ny, nx)
+    h_phase : sequence of ndarray, complex
+    alpha : float
+        Regularisation α (paper Eq. 7).
+    workers : int
+        FFT threads.
+
+    Returns
+    -------
+    ndarray, float32, (..., ny, nx)
+        Phase, rad.
     """
     num = 0
     den = alpha
@@ -38,10 +65,40 @@ def tikhonov_phase(dpc, h_phase, alpha: float, workers: int = -1):
 
 
 def phase_to_delta_n(phase, wavelength_um: float, dz_um: float):
-    """Δn = λ φ / (2π d) with the vacuum wavelength and the slice spacing d."""
+    """Δn = λ φ / (2π d) with the vacuum wavelength and the slice spacing d.
+
+    Parameters
+    ----------
+    phase : ndarray
+        Phase per slab, rad.
+    wavelength_um : float
+        Vacuum wavelength, µm.
+    dz_um : float
+        Slab thickness, µm.
+
+    Returns
+    -------
+    ndarray
+        Δn (no unit).
+    """
     return np.asarray(phase, dtype=np.float32) * np.float32(wavelength_um / (2 * np.pi * dz_um))
 
 
 def refractive_index(phase, wavelength_um: float, dz_um: float, medium_index: float):
-    """n = n_medium + Δn."""
+    """n = n_medium + Δn.
+
+    Parameters
+    ----------
+    phase : ndarray
+        Phase per slab, rad.
+    wavelength_um : float
+        Vacuum wavelength, µm.
+    dz_um : float
+        Slab thickness, µm.
+    medium_index : float
+
+    Returns
+    -------
+    ndarray
+    """
     return np.float32(medium_index) + phase_to_delta_n(phase, wavelength_um, dz_um)

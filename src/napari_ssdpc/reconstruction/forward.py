@@ -97,10 +97,21 @@ class ViewModel:
 
     @property
     def n_views(self) -> int:
+        """K, the number of views (lit lenslets)."""
         return self.a.shape[1]
 
     def planes(self, sl: slice) -> ViewModel:
-        """The same model on a contiguous subset of its planes (shares nothing mutable)."""
+        """The same model on a contiguous subset of its planes (shares nothing mutable).
+
+        Parameters
+        ----------
+        sl : slice
+            Planes to keep.
+
+        Returns
+        -------
+        ViewModel
+        """
         out = copy.copy(self)
         out.z_um = self.z_um[sl]
         out.a = np.ascontiguousarray(self.a[:, :, sl])
@@ -118,30 +129,91 @@ class ViewModel:
         return sfft.rfft2(c, norm="ortho", workers=-1)
 
     def spectra(self, contrast) -> np.ndarray:
-        """:meth:`full_spectra` on the band, (P, K)."""
+        """:meth:`full_spectra` on the band, (P, K).
+
+        Parameters
+        ----------
+        contrast : ndarray, float32, (K, ny, nx)
+            The views' contrast.
+
+        Returns
+        -------
+        ndarray, complex64, (P, K)
+        """
         return self.take(self.full_spectra(contrast))
 
     def take(self, spec) -> np.ndarray:
-        """(n, ny, nx//2+1) spectra -> their band, (P, n)."""
+        """(n, ny, nx//2+1) spectra -> their band, (P, n).
+
+        Parameters
+        ----------
+        spec : ndarray, complex, (n, ny, nx//2+1)
+
+        Returns
+        -------
+        ndarray, complex, (P, n)
+        """
         band = self.band.take(spec)
         return band.reshape(band.shape[0], -1).T
 
     def put(self, values, lead: int, dtype=np.complex64) -> np.ndarray:
-        """(P, n) band values -> (n, ny, nx//2+1) spectra, zero beyond the band."""
+        """(P, n) band values -> (n, ny, nx//2+1) spectra, zero beyond the band.
+
+        Parameters
+        ----------
+        values : ndarray, complex, (P, n)
+        lead : int
+            n.
+        dtype : dtype
+
+        Returns
+        -------
+        ndarray, (n, ny, nx//2+1)
+        """
         out = np.zeros((lead, self.shape[0], self.shape[1] // 2 + 1), dtype)
         self.band.put(out, values.T.reshape((lead,) + self.band.box_shape))
         return out
 
     def images(self, values) -> np.ndarray:
-        """(P, n) band values -> (n, ny, nx) real images (unitary inverse FFT), float32."""
+        """(P, n) band values -> (n, ny, nx) real images (unitary inverse FFT), float32.
+
+        Parameters
+        ----------
+        values : ndarray, complex, (P, n)
+
+        Returns
+        -------
+        ndarray, float32, (n, ny, nx)
+        """
         spec = self.put(values, values.shape[1])
         return sfft.irfft2(spec, s=self.shape, norm="ortho", workers=-1).astype(np.float32)
 
     def forward(self, phi_band) -> np.ndarray:
-        """A φ̂ per band frequency: (P, Z) -> (P, K)."""
+        """A φ̂ per band frequency: (P, Z) -> (P, K).
+
+        Parameters
+        ----------
+        phi_band : ndarray, complex, (P, Z)
+            The phase's band values, rad.
+
+        Returns
+        -------
+        ndarray, complex, (P, K)
+            The views' contrast on the band.
+        """
         return apply(self.a, phi_band)
 
 
 def apply(m, x) -> np.ndarray:
-    """One matrix per band frequency times one vector each: (P, M, N) @ (P, N) -> (P, M)."""
+    """One matrix per band frequency times one vector each: (P, M, N) @ (P, N) -> (P, M).
+
+    Parameters
+    ----------
+    m : ndarray, (P, M, N)
+    x : ndarray, (P, N)
+
+    Returns
+    -------
+    ndarray, (P, M)
+    """
     return np.matmul(m, x[:, :, None])[:, :, 0]

@@ -63,7 +63,17 @@ class Quantity:
         return {"volume": "ZYX", "map": "YX", "channels": "CZYX"}[self.kind]
 
     def of(self, result: Any) -> np.ndarray | None:
-        """This quantity of a Result, or None when the result does not hold it."""
+        """This quantity of a Result, or None when the result does not hold it.
+
+        Parameters
+        ----------
+        result : Result
+
+        Returns
+        -------
+        ndarray or None
+            Its kind's shape: (z, y, x), (y, x) or (c, z, y, x).
+        """
         value = self.get(result)
         if self.kind == "channels":
             if not value:
@@ -168,6 +178,10 @@ def parse_save(text: str | Iterable[str] | None) -> list[str]:
     -------
     list of str
         Names in registry order, without 'ri' (always written).
+
+    Parameters
+    ----------
+    text : str, iterable of str or None
     """
     names = [s.strip() for s in text.split(",")] if isinstance(text, str) else list(text or [])
     names = [s for s in names if s]
@@ -178,7 +192,18 @@ def parse_save(text: str | Iterable[str] | None) -> list[str]:
 
 
 def images(result: Any, save: Iterable[str]) -> dict[str, tuple[np.ndarray, str, str]]:
-    """{name: (array, axes, description)}: RI and the requested quantities of one frame."""
+    """{name: (array, axes, description)}: RI and the requested quantities of one frame.
+
+    Parameters
+    ----------
+    result : Result
+    save : iterable of str
+        Registry names beside RI.
+
+    Returns
+    -------
+    dict
+    """
     out = {}
     for name in ["ri", *parse_save(list(save))]:
         q = QUANTITIES[name]
@@ -190,7 +215,21 @@ def images(result: Any, save: Iterable[str]) -> dict[str, tuple[np.ndarray, str,
 
 
 def layout(n_z: int, shape_yx: tuple[int, int], save: Iterable[str]) -> dict[str, tuple[tuple, str, str]]:
-    """{name: (shape per frame, axes, description)} without reconstructing anything."""
+    """{name: (shape per frame, axes, description)} without reconstructing anything.
+
+    Parameters
+    ----------
+    n_z : int
+        Planes.
+    shape_yx : (int, int)
+        (ny, nx) of a plane.
+    save : iterable of str
+        Registry names beside RI.
+
+    Returns
+    -------
+    dict
+    """
     out = {}
     for name in ["ri", *parse_save(list(save))]:
         q = QUANTITIES[name]

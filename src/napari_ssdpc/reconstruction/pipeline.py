@@ -52,7 +52,19 @@ __all__ = ["Cancelled", "Reconstructor", "Result", "estimate_dark", "z_grid"]
 
 
 def z_grid(z_min_um: float, z_max_um: float, dz_um: float) -> np.ndarray:
-    """Planes from z_min to z_max (inclusive) every dz µm."""
+    """Planes from z_min to z_max (inclusive) every dz µm.
+
+    Parameters
+    ----------
+    z_min_um, z_max_um : float
+        First and last plane, µm from the focal plane.
+    dz_um : float
+        Spacing, µm.
+
+    Returns
+    -------
+    ndarray, float64, (Z,)
+    """
     if not dz_um > 0:
         raise SsdpcError(f"dz must be > 0 µm, got {dz_um}")
     if z_max_um < z_min_um:
@@ -62,7 +74,19 @@ def z_grid(z_min_um: float, z_max_um: float, dz_um: float) -> np.ndarray:
 
 
 def estimate_dark(frame, calibration: Calibration) -> float:
-    """Dark offset: median of the pixels farther than 1.2 EI radii from every lenslet centre."""
+    """Dark offset: median of the pixels farther than 1.2 EI radii from every lenslet centre.
+
+    Parameters
+    ----------
+    frame : ndarray, (H, W)
+        Camera units.
+    calibration : Calibration
+
+    Returns
+    -------
+    float
+        Camera units.
+    """
     img = np.asarray(frame, np.float32)
     step = 8  # a sparse sample is plenty for a median
     yy, xx = np.mgrid[0 : img.shape[0] : step, 0 : img.shape[1] : step]
@@ -284,7 +308,17 @@ class Reconstructor:
 
     # ---------------------------------------------------------- per frame
     def preprocess(self, frame) -> np.ndarray:
-        """Dark-subtracted, flat-fielded, non-negative views (K_lit, h, w)."""
+        """Dark-subtracted, flat-fielded, non-negative views (K_lit, h, w).
+
+        Parameters
+        ----------
+        frame : array_like, (H, W)
+            Raw frame, camera units.
+
+        Returns
+        -------
+        ndarray, float32, (K_lit, h, w)
+        """
         cal = self.calibration
         img = cal.check_frame(frame)
         warn_saturation(frame)
@@ -297,6 +331,22 @@ class Reconstructor:
         return np.clip(np.where(self.view_mask, views, 0), 0, None).astype(np.float32)
 
     def reconstruct(self, frame, progress=None, should_stop=None) -> Result:
+        """The RI volume of one raw frame (and whatever else the settings ask for).
+
+        Parameters
+        ----------
+        frame : array_like, (H, W)
+            Raw frame, camera units.
+        progress : callable, optional
+            ``progress(done, total, label)`` per iteration.
+        should_stop : callable, optional
+            Checked every iteration; True stops with :class:`~napari_ssdpc.errors.Cancelled`.
+
+        Returns
+        -------
+        Result
+            RI, Δn and phase volumes (z, y, x) on the µm grid, the 2D maps, the settings and timings.
+        """
         t0 = time.perf_counter()
         views = self.preprocess(frame)
         t1 = time.perf_counter()
@@ -335,7 +385,22 @@ class Reconstructor:
 
     def phase_from(self, views, dpc, progress=None, should_stop=None):
         """Phase per slab (Z, ny, nx) by the chosen method, from the preprocessed views ('tv',
-        'wotf') or the DPC stacks ('rl'), and the TV solver's report (None for the others)."""
+        'wotf') or the DPC stacks ('rl'), and the TV solver's report (None for the others).
+
+        Parameters
+        ----------
+        views : ndarray, float32, (K, h, w)
+            Preprocessed views.
+        dpc : dict
+            {'ud', 'lr'}: DPC stacks (Z, h, w) ('rl' only).
+        progress, should_stop : callable, optional
+
+        Returns
+        -------
+        phase : ndarray, float32, (Z, ny, nx)
+            rad per slab.
+        report : TvReport or None
+        """
         if self.method == "rl":
             h = [self.h_dpc["ud"], self.h_dpc["lr"]]
             return tikhonov_phase([dpc["ud"], dpc["lr"]], h, self.alpha) * self.mask, None
@@ -360,7 +425,20 @@ class Reconstructor:
 
     def dpc_from_stacks(self, stacks):
         """DPC stacks (Eq. 1), each slice normalised by the pair's z-summed intensity, and the
-        absorption μ per slice from the sum of the four stacks."""
+        absorption μ per slice from the sum of the four stacks.
+
+        Parameters
+        ----------
+        stacks : dict
+            {half: (Z, h, w)} Richardson-Lucy stacks.
+
+        Returns
+        -------
+        dpc : dict
+            {'ud', 'lr'}: (Z, h, w).
+        absorption : ndarray, (Z, h, w)
+            μ per slice.
+        """
         dpc = {}
         for ax, (a, b) in PAIRS.items():
             background = np.sum(stacks[a] + stacks[b], axis=0)  # the pair's total intensity per pixel

@@ -147,6 +147,14 @@ class TvInversion:
 
         Nothing the instrument images lies beyond |u| = 2ρ; the median of |ĉ|² out there is
         robust against the few frequencies the field-stop edge leaks.
+
+        Parameters
+        ----------
+        contrast : ndarray, float32, (K, ny, nx)
+
+        Returns
+        -------
+        float
         """
         return self._noise(self.model.full_spectra(contrast))
 

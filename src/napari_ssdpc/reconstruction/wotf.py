@@ -47,6 +47,15 @@ class WotfInversion:
         self.inverse = np.matmul(a_h, inv).astype(np.complex64)  # (P, Z, K)
 
     def phase(self, contrast) -> np.ndarray:
-        """Phase per slab, (Z, ny, nx) float32 rad, from the views' contrast (K, ny, nx)."""
+        """Phase per slab, (Z, ny, nx) float32 rad, from the views' contrast (K, ny, nx).
+
+        Parameters
+        ----------
+        contrast : ndarray, float32, (K, ny, nx)
+
+        Returns
+        -------
+        ndarray, float32, (Z, ny, nx)
+        """
         spec = self.model.spectra(contrast)  # (P, K)
         return self.model.images(apply(self.inverse, spec))

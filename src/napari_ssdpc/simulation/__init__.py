@@ -1,1 +1,27 @@
-"""simulation"""
+"""The independent forward simulator: phantoms, multislice propagation, lenslets, camera.
+
+It keeps its own discretisation, so that the reconstruction is checked against a model it does
+not share (no inverse crime).
+"""
+
+from napari_ssdpc.simulation.camera import Camera
+from napari_ssdpc.simulation.imperfect import ArrayErrors
+from napari_ssdpc.simulation.multislice import Source
+from napari_ssdpc.simulation.phantoms import bar_target, cell, moving_sample, pmma_bead, two_beads
+from napari_ssdpc.simulation.sample_free import flat_frame, white_frame
+from napari_ssdpc.simulation.simulate import Simulation, simulate
+
+__all__ = [
+    "ArrayErrors",
+    "Camera",
+    "Simulation",
+    "Source",
+    "bar_target",
+    "cell",
+    "flat_frame",
+    "moving_sample",
+    "pmma_bead",
+    "simulate",
+    "two_beads",
+    "white_frame",
+]

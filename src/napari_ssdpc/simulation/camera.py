@@ -52,22 +52,54 @@ class Camera:
 
     @property
     def max_adu(self) -> int:
+        """Largest value of the ADC, ADU."""
         return 2 ** int(self.bit_depth) - 1
 
     def rng(self, rng=None) -> np.random.Generator:
-        """The generator to use: ``rng`` if given, else one seeded with ``seed``."""
+        """The generator to use: ``rng`` if given, else one seeded with ``seed``.
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator or int, optional
+
+        Returns
+        -------
+        numpy.random.Generator
+        """
         if isinstance(rng, np.random.Generator):
             return rng
         return np.random.default_rng(self.seed if rng is None else rng)
 
     def adu(self, intensity) -> np.ndarray:
-        """Expected (noise-free, unquantised) ADU image, with full-well and ADC clipping."""
+        """Expected (noise-free, unquantised) ADU image, with full-well and ADC clipping.
+
+        Parameters
+        ----------
+        intensity : ndarray
+            Intensity unit (1 = a fully lit EI without sample).
+
+        Returns
+        -------
+        ndarray, float64
+            ADU.
+        """
         e = np.clip(np.asarray(intensity, dtype=np.float64), 0, None) * self.exposure_e
         e = np.minimum(e, self.full_well_e)
         return np.clip(e * self.gain_adu_per_e + self.dark_offset_adu, 0, self.max_adu)
 
     def apply(self, intensity, rng=None) -> np.ndarray:
-        """Raw uint16 frame of an intensity image (unit: see module docstring)."""
+        """Raw uint16 frame of an intensity image (unit: see module docstring).
+
+        Parameters
+        ----------
+        intensity : ndarray
+            Intensity unit.
+        rng : numpy.random.Generator or int, optional
+
+        Returns
+        -------
+        ndarray, uint16
+        """
         intensity = np.asarray(intensity, dtype=np.float64)
         if not np.all(np.isfinite(intensity)):
             raise SsdpcError("intensity contains NaN or inf; check the simulation input")
@@ -81,6 +113,18 @@ class Camera:
         return np.clip(np.rint(adu), 0, self.max_adu).astype(np.uint16)
 
     def illumination(self, r_um, field_radius_um) -> np.ndarray:
-        """Relative Köhler illumination at object-plane radius ``r_um`` (1 on the axis)."""
+        """Relative Köhler illumination at object-plane radius ``r_um`` (1 on the axis).
+
+        Parameters
+        ----------
+        r_um : ndarray
+            Radius in the object plane, µm.
+        field_radius_um : float
+            Field-stop radius, µm.
+
+        Returns
+        -------
+        ndarray
+        """
         r = np.asarray(r_um, dtype=np.float64) / float(field_radius_um)
         return np.clip(1.0 - self.falloff * r * r, 0.0, None)

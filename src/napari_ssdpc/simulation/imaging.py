@@ -30,7 +30,23 @@ from napari_ssdpc.simulation.multislice import disk_fraction, even_fast
 
 def lenslet_windows(lenslets, optics, sampling, nc, supersample=8):
     """Per lenslet: absolute lattice index of the crop centre and the anti-aliased
-    sub-aperture A_k = P_obj · P_k on the crop (|amplitude|² = area fraction of the cell)."""
+    sub-aperture A_k = P_obj · P_k on the crop (|amplitude|² = area fraction of the cell).
+
+    Parameters
+    ----------
+    lenslets : list of Lenslet
+    optics : Optics
+    sampling : Sampling
+    nc : int
+        Crop width, lattice units.
+    supersample : int
+        Sub-samples per lattice cell side.
+
+    Returns
+    -------
+    centres : ndarray, int, (K, 2)
+    apertures : ndarray, float32, (K, nc, nc)
+    """
     du, rho, cut = sampling.du, optics.subaperture_radius, optics.cutoff
     off = np.arange(nc) - nc // 2
     t = ((np.arange(supersample) + 0.5) / supersample - 0.5) * du
@@ -48,7 +64,17 @@ def lenslet_windows(lenslets, optics, sampling, nc, supersample=8):
 
 
 def crop_size(optics, sampling):
-    """Crop width (lattice units) that holds the sub-aperture and its 2ρ-wide intensity spectrum."""
+    """Crop width (lattice units) that holds the sub-aperture and its 2ρ-wide intensity spectrum.
+
+    Parameters
+    ----------
+    optics : Optics
+    sampling : Sampling
+
+    Returns
+    -------
+    int
+    """
     nc = even_fast(int(math.ceil(4 * optics.subaperture_radius / sampling.du)) + 4)
     return min(nc, sampling.n)
 
@@ -75,7 +101,21 @@ class Imager:
         self.scale = (self.nc / n) ** 4 / (math.pi * optics.subaperture_radius**2)
 
     def image_spectrum(self, v_full, idx, z_exit):
-        """Spectrum (V frame) of the field after the objective pupil and the iris."""
+        """Spectrum (V frame) of the field after the objective pupil and the iris.
+
+        Parameters
+        ----------
+        v_full : ndarray, complex, (n, n)
+            Exit envelope on the full grid.
+        idx : ndarray, int, (2,)
+            Lattice index of the plane wave.
+        z_exit : float
+            Depth of the exit plane, µm.
+
+        Returns
+        -------
+        ndarray, complex, (n, n)
+        """
         n = self.sampling.n
         if getattr(self, "_z", None) != z_exit:  # exp(i2π z η(u)) P_obj(u) on the absolute lattice
             self._z = z_exit
@@ -89,12 +129,31 @@ class Imager:
         return sfft.fft2(img, workers=-1, overwrite_x=True)
 
     def empty_spectrum(self, idx):
-        """Spectrum after the iris of an unperturbed plane wave (no sample)."""
+        """Spectrum after the iris of an unperturbed plane wave (no sample).
+
+        Parameters
+        ----------
+        idx : ndarray, int, (2,)
+            Lattice index of the plane wave.
+
+        Returns
+        -------
+        ndarray, complex, (n, n)
+        """
         p = self.pupil[idx[1] % self.sampling.n, idx[0] % self.sampling.n]
         return self.mask_spec if p == 1 else self.mask_spec * p
 
     def add(self, spec, idx, weight):
-        """Crop every lenslet's sub-aperture out of ``spec`` and add |field|² x weight."""
+        """Crop every lenslet's sub-aperture out of ``spec`` and add |field|² x weight.
+
+        Parameters
+        ----------
+        spec : ndarray, complex, (n, n)
+        idx : ndarray, int, (2,)
+            Lattice index of the plane wave.
+        weight : float
+            The source point's weight.
+        """
         n = self.sampling.n
         rows = (self.centres[:, 1, None] - idx[1] + self.off[None, :]) % n
         cols = (self.centres[:, 0, None] - idx[0] + self.off[None, :]) % n
@@ -110,7 +169,23 @@ class Imager:
 # ------------------------------------------------------------------------------ render
 def render(coeffs, centres, optics, sampling, grid, camera):
     """Place the band-limited EI intensities at their centres (K, 2) px on the sensor
-    (float image, intensity unit)."""
+    (float image, intensity unit).
+
+    Parameters
+    ----------
+    coeffs : ndarray, complex, (K, m, m)
+        Fourier coefficients of each EI's intensity.
+    centres : ndarray, (K, 2)
+        EI centres (x, y), px.
+    optics : Optics
+    sampling : Sampling
+    grid : Grid
+    camera : Camera
+
+    Returns
+    -------
+    ndarray, float64, (H, W)
+    """
     H, W = optics.height_px, optics.width_px
     frame = np.zeros((H, W), dtype=np.float64)
     nc = coeffs.shape[-1]
@@ -176,7 +251,24 @@ def _fourier_eval(c, f, y, x):
 
 
 def array_as_built(optics, grid, camera, array=None):
-    """Grid, camera, the lenslets as built (``array``: ArrayErrors) and their EI centres."""
+    """Grid, camera, the lenslets as built (``array``: ArrayErrors) and their EI centres.
+
+    Parameters
+    ----------
+    optics : Optics
+    grid : Grid, optional
+        Default the nominal grid.
+    camera : Camera, optional
+    array : ArrayErrors, optional
+
+    Returns
+    -------
+    grid : Grid
+    camera : Camera
+    lenslets : list of Lenslet
+    centres : ndarray, (K, 2)
+        EI centres (x, y), px.
+    """
     grid = grid or Grid.nominal(optics)
     camera = camera or Camera()
     lenslets = grid.lenslets(optics)

@@ -51,7 +51,17 @@ class ArrayErrors:
             raise SsdpcError(f"ArrayErrors.shear_deg must be within ±10°, got {self.shear_deg}")
 
     def offset_px(self, grid: Grid, row: int, col: int) -> np.ndarray:
-        """Displacement (x, y) px of lenslet (row, col) from its ideal lattice site."""
+        """Displacement (x, y) px of lenslet (row, col) from its ideal lattice site.
+
+        Parameters
+        ----------
+        grid : Grid
+        row, col : int
+
+        Returns
+        -------
+        ndarray, (2,)
+        """
         rng = np.random.default_rng([self.seed, row + 10_000, col + 10_000])
         r = self.offset_frac * grid.pitch_px * math.sqrt(rng.uniform())
         phi = rng.uniform(0, 2 * math.pi)
@@ -62,7 +72,20 @@ class ArrayErrors:
     def apply(self, grid: Grid, lenslets: list[Lenslet], optics: Optics) -> tuple[list[Lenslet], np.ndarray]:
         """The lenslets as built: moved a_um, u and fraction, and their EI centres (K, 2) px.
 
-        Lenslets that no longer overlap the pupil keep a fraction of 0 (they stay dark)."""
+        Lenslets that no longer overlap the pupil keep a fraction of 0 (they stay dark).
+
+        Parameters
+        ----------
+        grid : Grid
+        lenslets : list of Lenslet
+        optics : Optics
+
+        Returns
+        -------
+        lenslets : list of Lenslet
+        centres : ndarray, (K, 2)
+            px.
+        """
         um_per_px = optics.pitch_um / grid.pitch_px
         moved, centres = [], []
         for ln in lenslets:
@@ -121,7 +144,24 @@ def content(intensity, centres_px, radius_px, *, contrast=1.0, parallax_px=3.0, 
     in each EI, shifted by a parallax that grows with the EI's distance from the array centre.
 
     ``contrast`` 1 makes the brightest blobs twice as bright as the empty field. Returns a
-    float64 image of the same shape."""
+    float64 image of the same shape.
+
+    Parameters
+    ----------
+    intensity : ndarray, (H, W)
+    centres_px : ndarray, (K, 2)
+        EI centres (x, y), px.
+    radius_px : float
+        EI radius, px.
+    contrast : float
+    parallax_px : float
+        Shift of the outermost EI, px.
+    seed : int
+
+    Returns
+    -------
+    ndarray, float64, (H, W)
+    """
     out = np.array(intensity, dtype=np.float64)
     rng = np.random.default_rng(seed)
     n = int(2 * radius_px) + 1
@@ -145,7 +185,17 @@ def content(intensity, centres_px, radius_px, *, contrast=1.0, parallax_px=3.0, 
 
 
 def vignetting(intensity, strength=0.5):
-    """Brightness falling off across the sensor as ``1 - strength (r / r_corner)²`` about its centre."""
+    """Brightness falling off across the sensor as ``1 - strength (r / r_corner)²`` about its centre.
+
+    Parameters
+    ----------
+    intensity : ndarray, (H, W)
+    strength : float
+
+    Returns
+    -------
+    ndarray, (H, W)
+    """
     out = np.array(intensity, dtype=np.float64)
     rho, _ = _polar(out.shape, ((out.shape[1] - 1) / 2, (out.shape[0] - 1) / 2))
     return out * (1 - strength * (rho / rho.max()) ** 2)

@@ -47,7 +47,20 @@ class Sampling:
     @classmethod
     def for_optics(cls, optics: Optics, dx_um: float = DX_UM, guard_um: float | None = None) -> Sampling:
         """Grid covering the field of view plus a guard band on each side
-        (default max(15 µm, 15 % of the FOV)) for defocus blur and scattering."""
+        (default max(15 µm, 15 % of the FOV)) for defocus blur and scattering.
+
+        Parameters
+        ----------
+        optics : Optics
+        dx_um : float
+            Lateral sampling, µm.
+        guard_um : float, optional
+            Guard band, µm.
+
+        Returns
+        -------
+        Sampling
+        """
         guard = max(15.0, 0.15 * optics.fov_um) if guard_um is None else float(guard_um)
         if not 0 < dx_um <= 0.5 * optics.wavelength_um / (optics.na + optics.condenser_na):
             raise SsdpcError(
@@ -59,10 +72,12 @@ class Sampling:
 
     @property
     def size_um(self) -> float:
+        """Side of the grid, µm."""
         return self.n * self.dx_um
 
     @property
     def du(self) -> float:
+        """Frequency step 1/size, cycles/µm."""
         return 1.0 / self.size_um
 
     def x(self) -> np.ndarray:
@@ -70,10 +85,21 @@ class Sampling:
         return np.fft.fftfreq(self.n, 1.0 / self.n) * self.dx_um
 
     def u(self) -> np.ndarray:
+        """Frequencies of the grid (FFT order), cycles/µm."""
         return np.fft.fftfreq(self.n, self.dx_um)
 
 
 def even_fast(m: int) -> int:
+    """The smallest even FFT-friendly size >= ``m``.
+
+    Parameters
+    ----------
+    m : int
+
+    Returns
+    -------
+    int
+    """
     m = sfft.next_fast_len(int(m))
     while m % 2:
         m = sfft.next_fast_len(m + 1)
@@ -99,11 +125,34 @@ class Source:
             raise SsdpcError(f"Source.step must be a positive integer (lattice units), got {self.step}")
 
     def radius(self, optics: Optics) -> float:
+        """The condenser disk's radius on the frequency lattice, cycles/µm.
+
+        Parameters
+        ----------
+        optics : Optics
+
+        Returns
+        -------
+        float
+        """
         na = optics.condenser_na if self.na is None else float(self.na)
         return na / optics.wavelength_um
 
     def points(self, optics: Optics, sampling: Sampling):
-        """Integer lattice indices (K, 2) as (ix, iy), frequencies (K, 2) and weights (K,)."""
+        """Integer lattice indices (K, 2) as (ix, iy), frequencies (K, 2) and weights (K,).
+
+        Parameters
+        ----------
+        optics : Optics
+        sampling : Sampling
+
+        Returns
+        -------
+        idx : ndarray, int, (K, 2)
+        w : ndarray, (K, 2)
+            cycles/µm.
+        weights : ndarray, (K,)
+        """
         r = self.radius(optics)
         h = int(self.step)
         du = sampling.du
@@ -129,7 +178,21 @@ class Source:
 
 
 def disk_fraction(x, y, radius, pixel, supersample=8):
-    """Fraction of each pixel (side ``pixel``, centred at x, y) inside the disk r <= radius."""
+    """Fraction of each pixel (side ``pixel``, centred at x, y) inside the disk r <= radius.
+
+    Parameters
+    ----------
+    x, y : ndarray
+        Pixel centres (broadcast), any length unit.
+    radius : float
+    pixel : float
+        Pixel side.
+    supersample : int
+
+    Returns
+    -------
+    ndarray, float64
+    """
     x, y = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float))
     r = np.hypot(x, y)
     out = (r <= radius).astype(np.float64)
@@ -148,7 +211,25 @@ def propagate(field, d_um: float, dx_um: float, wavelength_um: float, n_medium: 
     evanescent components (|u + w| > n/λ) are damped for either sign of d.
 
     ``tilt`` = w (cycles/µm): the field is the envelope V of U = V exp(i2π w·x); for
-    w = 0 it is the field itself (the constant phase exp(i2π d η(0)) is dropped)."""
+    w = 0 it is the field itself (the constant phase exp(i2π d η(0)) is dropped).
+
+    Parameters
+    ----------
+    field : ndarray, complex, (ny, nx)
+    d_um : float
+        Distance, µm.
+    dx_um : float
+        Sampling, µm.
+    wavelength_um : float
+        Vacuum wavelength, µm.
+    n_medium : float
+    tilt : (float, float)
+        w, cycles/µm.
+
+    Returns
+    -------
+    ndarray, complex, (ny, nx)
+    """
     field = np.asarray(field)
     ny, nx = field.shape
     H = _propagator(ny, nx, dx_um, d_um, wavelength_um, n_medium, tilt)
@@ -213,7 +294,17 @@ class Slabs:
         self.taper = (w[:, None] * w[None, :]).astype(np.float32)
 
     def exit_envelope(self, tilt) -> np.ndarray:
-        """Envelope V of the exit field (at z_exit) for the plane wave of frequency ``tilt``."""
+        """Envelope V of the exit field (at z_exit) for the plane wave of frequency ``tilt``.
+
+        Parameters
+        ----------
+        tilt : (float, float)
+            Plane-wave frequency w, cycles/µm.
+
+        Returns
+        -------
+        ndarray, complex, (ns, ns)
+        """
         v = self.screens[0].copy()
         cache = {}
         for k in range(1, len(self.screens)):
@@ -224,7 +315,18 @@ class Slabs:
         return v
 
     def embed(self, v, n) -> np.ndarray:
-        """Full-grid envelope: 1 outside the sub-grid, tapered scattered part inside."""
+        """Full-grid envelope: 1 outside the sub-grid, tapered scattered part inside.
+
+        Parameters
+        ----------
+        v : ndarray, complex, (ns, ns)
+        n : int
+            Full grid size.
+
+        Returns
+        -------
+        ndarray, complex, (n, n)
+        """
         if self.full:
             return v
         out = np.ones((n, n), dtype=np.complex64)
@@ -237,7 +339,25 @@ def exit_field(
 ):
     """Multislice exit field of one plane wave (envelope V, ``U = V exp(i2π w·x)``).
 
-    Returns (V on the full grid in FFT order, z_exit µm, sampling). Useful for checks."""
+    Returns (V on the full grid in FFT order, z_exit µm, sampling). Useful for checks.
+
+    Parameters
+    ----------
+    phantom : Phantom
+    optics : Optics
+    tilt : (float, float)
+        w, cycles/µm.
+    sampling : Sampling, optional
+    dz_um : float
+        Largest slab thickness, µm.
+
+    Returns
+    -------
+    v : ndarray, complex, (n, n)
+    z_exit : float
+        µm.
+    sampling : Sampling
+    """
     phantom = phantom.with_medium(optics.medium_index)
     optics = optics_for(phantom, optics)
     sampling = sampling or Sampling.for_optics(optics)

@@ -50,15 +50,41 @@ class Ellipsoid:
         return (xr / a) ** 2 + (yr / b) ** 2
 
     def delta_n(self, z, y, x):
+        """Δn of the primitive at points (z, y, x) µm.
+
+        Parameters
+        ----------
+        z, y, x : array_like
+            Positions, µm (broadcast together).
+
+        Returns
+        -------
+        ndarray, complex
+            Δn (imaginary part: absorption) at each point.
+        """
         z, y, x = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (z, y, x)))
         c, cz = self.semi_axes_um[2], self.center_um[2]
         inside = self._lateral_q(y, x) + ((z - cz) / c) ** 2 <= 1.0
         return np.where(inside, complex(self.dn), 0j)
 
     def z_range(self):
+        """z extent of the primitive.
+
+        Returns
+        -------
+        (float, float)
+            z_min, z_max, µm.
+        """
         return self.center_um[2] - self.semi_axes_um[2], self.center_um[2] + self.semi_axes_um[2]
 
     def xy_box(self):
+        """Lateral bounding box of the primitive.
+
+        Returns
+        -------
+        (float, float, float, float)
+            x_min, x_max, y_min, y_max, µm.
+        """
         a, b, _ = self.semi_axes_um
         t = math.radians(self.angle_deg)
         hx = math.hypot(a * math.cos(t), b * math.sin(t))
@@ -67,7 +93,24 @@ class Ellipsoid:
         return cx - hx, cx + hx, cy - hy, cy + hy
 
     def slab(self, z0, z1, y, x, pixel_um, supersample=4):
-        """Pixel-averaged ∫Δn dz over [z0, z1]: exact chord in z, supersampled laterally."""
+        """Pixel-averaged ∫Δn dz over [z0, z1]: exact chord in z, supersampled laterally.
+
+        Parameters
+        ----------
+        z0, z1 : float
+            Slab bounds, µm.
+        y, x : ndarray
+            Pixel centres, µm (broadcast to the image).
+        pixel_um : float
+            Pixel side, µm.
+        supersample : int
+            Sub-samples per pixel side.
+
+        Returns
+        -------
+        ndarray, complex
+            ∫ Δn dz per pixel, µm.
+        """
         out = np.zeros((len(y), len(x)), dtype=np.complex128)
         zlo, zhi = self.z_range()
         if z1 <= zlo or z0 >= zhi:
@@ -98,6 +141,18 @@ class Box:
     dn: complex
 
     def delta_n(self, z, y, x):
+        """Δn of the primitive at points (z, y, x) µm.
+
+        Parameters
+        ----------
+        z, y, x : array_like
+            Positions, µm (broadcast together).
+
+        Returns
+        -------
+        ndarray, complex
+            Δn (imaginary part: absorption) at each point.
+        """
         z, y, x = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (z, y, x)))
         inside = np.ones(z.shape, dtype=bool)
         for v, c, s in zip((x, y, z), self.center_um, self.size_um):
@@ -105,13 +160,45 @@ class Box:
         return np.where(inside, complex(self.dn), 0j)
 
     def z_range(self):
+        """z extent of the primitive.
+
+        Returns
+        -------
+        (float, float)
+            z_min, z_max, µm.
+        """
         return self.center_um[2] - self.size_um[2] / 2, self.center_um[2] + self.size_um[2] / 2
 
     def xy_box(self):
+        """Lateral bounding box of the primitive.
+
+        Returns
+        -------
+        (float, float, float, float)
+            x_min, x_max, y_min, y_max, µm.
+        """
         (cx, cy, _), (sx, sy, _) = self.center_um, self.size_um
         return cx - sx / 2, cx + sx / 2, cy - sy / 2, cy + sy / 2
 
     def slab(self, z0, z1, y, x, pixel_um, supersample=4):
+        """Pixel-averaged ∫Δn dz over [z0, z1].
+
+        Parameters
+        ----------
+        z0, z1 : float
+            Slab bounds, µm.
+        y, x : ndarray
+            Pixel centres, µm (broadcast to the image).
+        pixel_um : float
+            Pixel side, µm.
+        supersample : int
+            Sub-samples per pixel side.
+
+        Returns
+        -------
+        ndarray, complex
+            ∫ Δn dz per pixel, µm.
+        """
         zlo, zhi = self.z_range()
         length = max(0.0, min(z1, zhi) - max(z0, zlo))
         fx = _interval_fraction(np.asarray(x, float), pixel_um, self.center_um[0], self.size_um[0])
@@ -143,9 +230,32 @@ class Phantom:
     needs_medium = True  # False: Δn is given relative to any medium (Composite, BarTarget)
 
     def parts(self, medium_index: float) -> list:
+        """The primitives of the phantom, with Δn against ``medium_index``.
+
+        Parameters
+        ----------
+        medium_index : float
+            Index of the medium (Δn of each part is taken against it).
+
+        Returns
+        -------
+        list of Ellipsoid or Box
+        """
         raise NotImplementedError
 
     def medium(self, medium_index=None) -> float:
+        """The medium the phantom sits in.
+
+        Parameters
+        ----------
+        medium_index : float, optional
+            Used when the phantom has none of its own.
+
+        Returns
+        -------
+        float
+            The phantom's own medium index, else ``medium_index`` (NaN for a phantom given as Δn).
+        """
         n = self.medium_index if self.medium_index is not None else medium_index
         if n is None and not self.needs_medium:
             return float("nan")
@@ -157,7 +267,16 @@ class Phantom:
         return float(n)
 
     def with_medium(self, medium_index: float) -> Phantom:
-        """A copy bound to ``medium_index`` (kept if the phantom already has one)."""
+        """A copy bound to ``medium_index`` (kept if the phantom already has one).
+
+        Parameters
+        ----------
+        medium_index : float
+
+        Returns
+        -------
+        Phantom
+        """
         if self.medium_index is not None:
             return self
         return replace(self, medium_index=float(medium_index))
@@ -166,7 +285,18 @@ class Phantom:
         return self.parts(self.medium(medium_index))
 
     def delta_n(self, z, y, x, medium_index=None) -> np.ndarray:
-        """Analytic complex Δn at points (z, y, x) µm (broadcast)."""
+        """Analytic complex Δn at points (z, y, x) µm (broadcast).
+
+        Parameters
+        ----------
+        z, y, x : array_like
+            Positions, µm (broadcast together).
+        medium_index : float, optional
+
+        Returns
+        -------
+        ndarray, complex
+        """
         shape = np.broadcast_shapes(np.shape(z), np.shape(y), np.shape(x))
         out = np.zeros(shape, dtype=np.complex128)
         for p in self._parts(medium_index):
@@ -174,12 +304,30 @@ class Phantom:
         return out
 
     def z_range(self, medium_index=1.0) -> tuple[float, float]:
-        """(z_min, z_max) µm of the sample (the z extent)."""
+        """(z_min, z_max) µm of the sample (the z extent).
+
+        Parameters
+        ----------
+        medium_index : float
+
+        Returns
+        -------
+        (float, float)
+        """
         rs = [p.z_range() for p in self.parts(self._any_medium(medium_index))]
         return min(r[0] for r in rs), max(r[1] for r in rs)
 
     def xy_box(self, medium_index=1.0) -> tuple[float, float, float, float]:
-        """Lateral bounding box (x_min, x_max, y_min, y_max) µm."""
+        """Lateral bounding box (x_min, x_max, y_min, y_max) µm.
+
+        Parameters
+        ----------
+        medium_index : float
+
+        Returns
+        -------
+        (float, float, float, float)
+        """
         bs = [p.xy_box() for p in self.parts(self._any_medium(medium_index))]
         return (min(b[0] for b in bs), max(b[1] for b in bs), min(b[2] for b in bs), max(b[3] for b in bs))
 
@@ -187,14 +335,45 @@ class Phantom:
         return self.medium_index if self.medium_index is not None else medium_index
 
     def slab(self, z0, z1, y, x, pixel_um, medium_index=None, supersample=4) -> np.ndarray:
-        """∫ Δn dz over [z0, z1] (µm), averaged over pixels of side ``pixel_um``."""
+        """∫ Δn dz over [z0, z1] (µm), averaged over pixels of side ``pixel_um``.
+
+        Parameters
+        ----------
+        z0, z1 : float
+            Slab bounds, µm.
+        y, x : ndarray
+            Pixel centres, µm.
+        pixel_um : float
+            Pixel side, µm.
+        medium_index : float, optional
+        supersample : int
+            Sub-samples per pixel side.
+
+        Returns
+        -------
+        ndarray, complex
+            µm.
+        """
         out = np.zeros((len(y), len(x)), dtype=np.complex128)
         for p in self._parts(medium_index):
             out += p.slab(z0, z1, y, x, pixel_um, supersample)
         return out
 
     def volume(self, z_um, y_um, x_um, medium_index=None, supersample=4) -> np.ndarray:
-        """Partial-volume voxel averages of Δn on the regular grid (z, y, x), complex."""
+        """Partial-volume voxel averages of Δn on the regular grid (z, y, x), complex.
+
+        Parameters
+        ----------
+        z_um, y_um, x_um : ndarray, 1D
+            Voxel centres, µm.
+        medium_index : float, optional
+        supersample : int
+            Sub-samples per voxel side.
+
+        Returns
+        -------
+        ndarray, complex, (Z, Y, X)
+        """
         z, y, x = (np.asarray(v, dtype=float) for v in (z_um, y_um, x_um))
         dz = float(z[1] - z[0]) if len(z) > 1 else 1.0
         dx = float(x[1] - x[0]) if len(x) > 1 else 1.0
@@ -213,6 +392,16 @@ class Composite(Phantom):
     needs_medium = False
 
     def parts(self, medium_index):
+        """The primitives (see :meth:`Phantom.parts`).
+
+        Parameters
+        ----------
+        medium_index : float
+
+        Returns
+        -------
+        list of Ellipsoid or Box
+        """
         if not self.items:
             raise SsdpcError("Composite phantom is empty; give it Ellipsoid/Box items")
         return list(self.items)
@@ -232,6 +421,16 @@ class Sphere(Phantom):
             raise SsdpcError(f"Sphere diameter_um must be > 0, got {self.diameter_um}")
 
     def parts(self, medium_index):
+        """The primitives (see :meth:`Phantom.parts`).
+
+        Parameters
+        ----------
+        medium_index : float
+
+        Returns
+        -------
+        list of Ellipsoid or Box
+        """
         r = self.diameter_um / 2
         return [Ellipsoid(tuple(map(float, self.center_um)), (r, r, r), complex(self.n) - medium_index)]
 
@@ -249,6 +448,16 @@ class Spheres(Phantom):
             raise SsdpcError("Spheres needs at least one Sphere")
 
     def parts(self, medium_index):
+        """The primitives (see :meth:`Phantom.parts`).
+
+        Parameters
+        ----------
+        medium_index : float
+
+        Returns
+        -------
+        list of Ellipsoid or Box
+        """
         return [p for s in self.spheres for p in s.parts(medium_index)]
 
 
@@ -269,6 +478,16 @@ class Cell(Phantom):
     medium_index: float | None = 1.33
 
     def parts(self, medium_index):
+        """The primitives (see :meth:`Phantom.parts`).
+
+        Parameters
+        ----------
+        medium_index : float
+
+        Returns
+        -------
+        list of Ellipsoid or Box
+        """
         t = math.radians(self.angle_deg)
         ox, oy, oz = self.nucleus_offset_um
         cx, cy, cz = self.center_um
@@ -311,6 +530,16 @@ class BarTarget(Phantom):
             raise SsdpcError(f"BarTarget transmittance must be in (0, 1], got {self.transmittance}")
 
     def parts(self, medium_index):
+        """The primitives (see :meth:`Phantom.parts`).
+
+        Parameters
+        ----------
+        medium_index : float
+
+        Returns
+        -------
+        list of Ellipsoid or Box
+        """
         t, lam = self.thickness_um, self.wavelength_um
         dn = self.phase_rad * lam / (2 * math.pi * t) + 1j * (-math.log(self.transmittance) * lam / (4 * math.pi * t))
         widths = [p * 2.5 for p in self.period_um]  # element width = 5 line widths
@@ -330,7 +559,17 @@ class BarTarget(Phantom):
 
 # ---------------------------------------------------------------------------- factories
 def pmma_bead(center_um=(0.0, 0.0, 0.0)) -> Sphere:
-    """The paper's bead: 13 µm PMMA (n 1.49) in oil of index 1.518 (§3.2)."""
+    """The paper's bead: 13 µm PMMA (n 1.49) in oil of index 1.518 (§3.2).
+
+    Parameters
+    ----------
+    center_um : (float, float, float)
+        (x, y, z) of the centre, µm.
+
+    Returns
+    -------
+    Sphere
+    """
     return Sphere(tuple(center_um), 13.0, 1.49, medium_index=1.518)
 
 
@@ -345,7 +584,21 @@ def cell(**kw) -> Cell:
 
 
 def bar_target(period_um=(8.76, 6.2, 4.92, 4.38), z_um=40.0, **kw) -> BarTarget:
-    """Thin absorbing USAF-like target; the paper resolves 4.38 µm periods (group 7 element 6)."""
+    """Thin absorbing USAF-like target; the paper resolves 4.38 µm periods (group 7 element 6).
+
+    Parameters
+    ----------
+    period_um : tuple of float
+        Bar periods, µm.
+    z_um : float
+        Depth of the target, µm.
+    **kw
+        More BarTarget fields.
+
+    Returns
+    -------
+    BarTarget
+    """
     return BarTarget(period_um=period_um, z_um=z_um, **kw)
 
 
@@ -354,7 +607,22 @@ def moving_sample(
 ) -> list[Cell]:
     """A swimmer: an ellipsoid (n 1.36, 9 x 5 x 4 µm semi-axes) with a 2 µm inclusion
     (n 1.42) moving in a straight line from ``start_um`` to ``end_um`` while it turns by
-    ``turn_deg``, in water; one phantom per frame."""
+    ``turn_deg``, in water; one phantom per frame.
+
+    Parameters
+    ----------
+    n_frames : int
+    start_um, end_um : (float, float, float)
+        (x, y, z) of the path's ends, µm.
+    turn_deg : float
+        Rotation over the path, degrees.
+    **kw
+        More Cell fields.
+
+    Returns
+    -------
+    list of Cell
+    """
     if int(n_frames) < 1:
         raise SsdpcError(f"moving_sample needs n_frames >= 1, got {n_frames}")
     base = dict(

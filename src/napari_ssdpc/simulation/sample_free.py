@@ -27,7 +27,20 @@ def white_intensity(
     inside the objective pupil (circle-overlap formula; no source quantisation). The
     brightness is set at the EI centre (the optical axis in the object): the lenslet
     PSF's tails spread ~1 % of the light past the field stop, which would otherwise
-    lower the plateau by that much (see docs/simulator.md)."""
+    lower the plateau by that much (see docs/simulator.md).
+
+    Parameters
+    ----------
+    optics : Optics
+    grid : Grid, optional
+        Default the nominal grid.
+    camera : Camera, optional
+    array : ArrayErrors, optional
+
+    Returns
+    -------
+    ndarray, float64, (H, W)
+    """
     grid, camera, lenslets, centres = array_as_built(optics, grid, camera, array)
     sampling = Sampling.for_optics(optics)
     nc = crop_size(optics, sampling)
@@ -71,7 +84,21 @@ def white_frame(
     array: ArrayErrors | None = None,
 ) -> np.ndarray:
     """Raw uint16 white frame (σ = 1): every lenslet inside the pupil is lit, edge
-    lenslets at the exact fraction of their sub-aperture inside the pupil."""
+    lenslets at the exact fraction of their sub-aperture inside the pupil.
+
+    Parameters
+    ----------
+    optics : Optics
+    grid : Grid, optional
+        Default the nominal grid.
+    camera : Camera, optional
+    rng : numpy.random.Generator or int, optional
+    array : ArrayErrors, optional
+
+    Returns
+    -------
+    ndarray, uint16, (H, W)
+    """
     camera = camera or Camera()
     return camera.apply(white_intensity(optics, grid, camera, array=array), camera.rng(rng))
 
@@ -89,7 +116,23 @@ def flat_intensity(
 
     Same source sampling and the same imaging code as ``simulate``, so that
     ``simulate(...).intensity / flat_intensity(...)`` is exactly 1 where the sample
-    does not scatter."""
+    does not scatter.
+
+    Parameters
+    ----------
+    optics : Optics
+    grid : Grid, optional
+        Default the nominal grid.
+    camera : Camera, optional
+    source : Source, optional
+    progress : callable, optional
+        ``progress(done, total)`` per source point.
+    array : ArrayErrors, optional
+
+    Returns
+    -------
+    ndarray, float64, (H, W)
+    """
     grid, camera, lenslets, centres = array_as_built(optics, grid, camera, array)
     sampling = Sampling.for_optics(optics)
     imager = Imager(optics, sampling, lenslets)
@@ -110,6 +153,21 @@ def flat_frame(
     *,
     array: ArrayErrors | None = None,
 ) -> np.ndarray:
-    """Raw uint16 flat frame (no sample) at the sample's condenser NA (σ < 1)."""
+    """Raw uint16 flat frame (no sample) at the sample's condenser NA (σ < 1).
+
+    Parameters
+    ----------
+    optics : Optics
+    grid : Grid, optional
+        Default the nominal grid.
+    camera : Camera, optional
+    rng : numpy.random.Generator or int, optional
+    source : Source, optional
+    array : ArrayErrors, optional
+
+    Returns
+    -------
+    ndarray, uint16, (H, W)
+    """
     camera = camera or Camera()
     return camera.apply(flat_intensity(optics, grid, camera, source, array=array), camera.rng(rng))

@@ -110,7 +110,30 @@ def simulate(
 
     ``progress(done, total)`` is called after every source point. A phantom with its
     own ``medium_index`` (e.g. ``cell()``, water) replaces the optics' medium; the
-    optics used is returned as ``Simulation.optics``."""
+    optics used is returned as ``Simulation.optics``.
+
+    Parameters
+    ----------
+    phantom : Phantom or None
+        The sample; None: no sample (a flat frame).
+    optics : Optics
+    grid : Grid, optional
+        Default the nominal grid.
+    camera : Camera, optional
+    source : Source, optional
+        Sampling of the condenser disk.
+    rng : numpy.random.Generator or int, optional
+    progress : callable, optional
+        ``progress(done, total)`` per source point.
+    dz_um : float
+        Largest slab thickness of the multislice, µm.
+    array : ArrayErrors, optional
+        A misaligned, imperfect lenslet array.
+
+    Returns
+    -------
+    Simulation
+    """
     t0 = time.perf_counter()
     optics = optics_for(phantom, optics)
     if phantom is not None:
@@ -159,7 +182,19 @@ def effective_tan_theta(optics: Optics, lenslet, supersample: int = 400) -> np.n
     """|pupil|²-weighted mean over A_k of tanθ(u)·û(u) (vector, object frame).
 
     A point at depth z appears displaced by z times this vector in the EI of
-    ``lenslet`` (docs/conventions.md); it is about 6 % below the centre value for clipped EIs."""
+    ``lenslet`` (docs/conventions.md); it is about 6 % below the centre value for clipped EIs.
+
+    Parameters
+    ----------
+    optics : Optics
+    lenslet : Lenslet
+    supersample : int
+        Samples across the sub-aperture.
+
+    Returns
+    -------
+    ndarray, (2,)
+    """
     rho, cut = optics.subaperture_radius, optics.cutoff
     t = np.linspace(-rho, rho, supersample)
     ux, uy = np.meshgrid(lenslet.u[0] + t, lenslet.u[1] + t)

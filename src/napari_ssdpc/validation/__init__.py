@@ -2,3 +2,6 @@
 
 Nothing here runs when a frame is reconstructed.
 """
+
+# Submodules, imported where they are used (matplotlib and the simulator load only then).
+__all__ = ["bench", "bench_report", "cases", "demo", "figures", "metrics", "reference"]

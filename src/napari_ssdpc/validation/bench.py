@@ -36,6 +36,13 @@ TARGETS = {"speedup": 10.0, "peak_gb": 4.0, "max_rel_diff": 1e-3, "tv_frame_s": 
 
 # ------------------------------------------------------------------- machine
 def machine() -> dict:
+    """What the benchmark ran on.
+
+    Returns
+    -------
+    dict
+        CPU, cores, memory (GB), Python, NumPy and SciPy versions, load average.
+    """
     model = platform.processor() or platform.machine()
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -90,7 +97,21 @@ def _simulate(name, condenser_na, frames, cache_dir):
 
 
 def simulated_case(name, condenser_na, cache_dir, frames=None):
-    """A cached simulated case; simulated in a child process when it is not cached yet."""
+    """A cached simulated case; simulated in a child process when it is not cached yet.
+
+    Parameters
+    ----------
+    name : str
+        'bead' (the standard case) or 'series'.
+    condenser_na : float
+    cache_dir : Path
+    frames : int, optional
+        Frames of a series.
+
+    Returns
+    -------
+    Case
+    """
     path = Path(cache_dir) / f"{name}_na{condenser_na:g}_s0.npz"
     if not path.is_file():
         import multiprocessing as mp
@@ -104,6 +125,13 @@ def simulated_case(name, condenser_na, cache_dir, frames=None):
 
 
 def default_cache() -> Path:
+    """Where simulated benchmark inputs are cached.
+
+    Returns
+    -------
+    Path
+        ``$XDG_CACHE_HOME/napari-ssdpc/bench`` (default ~/.cache).
+    """
     return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "napari-ssdpc" / "bench"
 
 
@@ -120,6 +148,27 @@ def _frame_times(rec, frame, repeats=2) -> dict:
 
 
 def fast_path(case, cal, cfg, device="cpu", stacks=True, repeats=2):
+    """Build the operators and time frames of the fast path.
+
+    Parameters
+    ----------
+    case : Case
+    cal : Calibration
+    cfg : dict
+        Reconstructor keywords (z, dz, iterations, method).
+    device : {'cpu', 'gpu'}
+    stacks : bool
+        Build the Richardson-Lucy operators too.
+    repeats : int
+        Frames timed (the best counts).
+
+    Returns
+    -------
+    rec : Reconstructor
+    result : Result
+    info : dict
+        Build and frame times (s), memory (MB).
+    """
     from napari_ssdpc.reconstruction.pipeline import Reconstructor
 
     t0 = time.perf_counter()
@@ -140,7 +189,24 @@ def fast_path(case, cal, cfg, device="cpu", stacks=True, repeats=2):
 
 
 def series_stage(case, cal, cfg, device, n_frames, rec=None) -> dict:
-    """Stream a TIFF series through ``ssdpc reconstruct``'s code (serial) into OME-Zarr."""
+    """Stream a TIFF series through ``ssdpc reconstruct``'s code (serial) into OME-Zarr.
+
+    Parameters
+    ----------
+    case : Case
+    cal : Calibration
+    cfg : dict
+        Reconstructor keywords.
+    device : {'cpu', 'gpu'}
+    n_frames : int
+    rec : Reconstructor, optional
+        Reused when given.
+
+    Returns
+    -------
+    dict
+        Frames per second and per-frame timings.
+    """
     import tifffile
 
     from napari_ssdpc.io.series import Recipe, reconstruct_series
@@ -169,7 +235,22 @@ def series_stage(case, cal, cfg, device, n_frames, rec=None) -> dict:
 
 
 def reference_stage(rec, res_fast, frame, canvas, fast_full=None) -> dict:
-    """The reference path on the Reconstructor's own z grid; speed-up and largest differences."""
+    """The reference path on the Reconstructor's own z grid; speed-up and largest differences.
+
+    Parameters
+    ----------
+    rec : Reconstructor
+    res_fast : Result
+        The fast path's result of ``frame``.
+    frame : ndarray, (H, W)
+    canvas : {'sensor', 'compact'}
+        The reference path's canvas.
+    fast_full : Result, optional
+
+    Returns
+    -------
+    dict
+    """
     from napari_ssdpc.validation.reference import max_relative_difference, reconstruct_reference
 
     ref = reconstruct_reference(rec, frame, canvas=canvas)
@@ -211,7 +292,24 @@ def run_bench(
     high_na_case=None,
 ) -> dict:
     """Run every stage and return the report (a JSON-able dict). ``case`` / ``series_case`` /
-    ``high_na_case`` replace the simulated inputs (tests); ``high_na_case=False`` skips NA 0.3."""
+    ``high_na_case`` replace the simulated inputs (tests); ``high_na_case=False`` skips NA 0.3.
+
+    Parameters
+    ----------
+    quick : bool
+        Coarse z grid and few iterations (a smoke test).
+    device : {'cpu', 'gpu'}
+    cache_dir : Path, optional
+    reference : bool
+        Also run the slow reference path.
+    log : callable, optional
+        ``log(text)`` for progress lines.
+    case, series_case, high_na_case : Case, optional
+
+    Returns
+    -------
+    dict
+    """
     from napari_ssdpc.calibration.calibrate import calibrate
     from napari_ssdpc.reconstruction.backend import get_backend
 

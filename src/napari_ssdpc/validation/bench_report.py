@@ -24,6 +24,18 @@ def _f(v, nd=2):
 
 
 def format_report(report) -> str:
+    """The benchmark report as Markdown tables.
+
+    Parameters
+    ----------
+    report : dict
+        As :func:`~napari_ssdpc.validation.bench.run_bench` returns it.
+
+    Returns
+    -------
+    str
+        Markdown.
+    """
     m, c, st = report["machine"], report["case"], report["stages"]
     lines = [
         f"machine: {m['cpu']}, {m['cores']} cores, {m['memory_gb']} GB; Python {m['python']}, "

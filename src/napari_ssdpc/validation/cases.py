@@ -47,7 +47,24 @@ class Case:
 def simulate_case(
     name, phantom, optics, *, cache_dir=None, seed=0, axis_offset_px=(3.7, -2.2), rotation_deg=0.4
 ) -> Case:
-    """Simulate raw/flat/white frames (cached as .npz in ``cache_dir`` when given)."""
+    """Simulate raw/flat/white frames (cached as .npz in ``cache_dir`` when given).
+
+    Parameters
+    ----------
+    name : str
+    phantom : Phantom
+    optics : Optics
+    cache_dir : Path, optional
+    seed : int
+    axis_offset_px : (float, float)
+        Misalignment of the array, px.
+    rotation_deg : float
+        Rotation of the array, degrees.
+
+    Returns
+    -------
+    Case
+    """
     first = phantom[0] if isinstance(phantom, list) else phantom
     if first is not None and first.medium_index is not None:
         optics = optics.replace(medium_index=float(first.medium_index))
@@ -79,6 +96,24 @@ def simulate_case(
 
 
 def reconstruct_case(case: Case, *, z=(-80.0, 80.0), dz=1.0, **kw):
+    """Calibrate on the case's white frame and reconstruct its frame.
+
+    Parameters
+    ----------
+    case : Case
+    z : (float, float)
+        z range, µm.
+    dz : float
+        µm.
+    **kw
+        More Reconstructor keywords.
+
+    Returns
+    -------
+    result : Result
+    calibration : Calibration
+    rec : Reconstructor
+    """
     cal = calibrate(case.white, case.optics)
     rec = Reconstructor(case.optics, cal, z=z, dz=dz, flat=case.flat, **kw)
     frame = case.frame if case.frame.ndim == 2 else case.frame[0]
@@ -87,7 +122,19 @@ def reconstruct_case(case: Case, *, z=(-80.0, 80.0), dz=1.0, **kw):
 
 def truth_volume(phantom, result, medium_index, blur_um=None):
     """Δn of the phantom on the reconstruction grid; optionally Gaussian-blurred to the
-    system resolution ``blur_um`` = (FWHM_z, FWHM_xy)."""
+    system resolution ``blur_um`` = (FWHM_z, FWHM_xy).
+
+    Parameters
+    ----------
+    phantom : Phantom
+    result : Result
+    medium_index : float
+    blur_um : (float, float), optional
+
+    Returns
+    -------
+    ndarray, float32, (Z, Y, X)
+    """
     vol = np.real(phantom.volume(result.z_um, result.y_um, result.x_um, medium_index=medium_index))
     if blur_um is not None:
         dz, dy, dx = result.voxel_um
@@ -106,7 +153,18 @@ def _index(result, point):
 
 
 def bead_metrics(result, sphere, medium_index) -> dict:
-    """RI at the centre, centroid, lateral/axial FWHM and the z-integrated Δn through the centre."""
+    """RI at the centre, centroid, lateral/axial FWHM and the z-integrated Δn through the centre.
+
+    Parameters
+    ----------
+    result : Result
+    sphere : Sphere
+    medium_index : float
+
+    Returns
+    -------
+    dict
+    """
     x, y, z = sphere.center_um
     sign = 1 if np.real(sphere.n) > medium_index else -1
     dn = result.delta_n
@@ -149,7 +207,17 @@ def bar_metrics(result, target) -> dict:
 
     The contrast is Michelson's (A_bar − A_gap)/(A_bar + A_gap) on the absorption image as it
     is displayed, A = max(μ, 0) (deconvolution ringing below zero shows as black), sampled at
-    the bar centres and midway between them: 1 for clean bars, 0 when they merge."""
+    the bar centres and midway between them: 1 for clean bars, 0 when they merge.
+
+    Parameters
+    ----------
+    result : Result
+    target : BarTarget
+
+    Returns
+    -------
+    dict
+    """
     mu = result.absorption
     iz = int(np.argmin(abs(result.z_um - target.z_um)))
     parts = target.parts(float("nan"))
@@ -173,7 +241,19 @@ def bar_metrics(result, target) -> dict:
 
 
 def cell_metrics(result, cell, resolution_um) -> dict:
-    """Correlation with the truth blurred to the system resolution; RI inside the nucleus."""
+    """Correlation with the truth blurred to the system resolution; RI inside the nucleus.
+
+    Parameters
+    ----------
+    result : Result
+    cell : Cell
+    resolution_um : (float, float)
+        (FWHM_z, FWHM_xy), µm.
+
+    Returns
+    -------
+    dict
+    """
     n_med = float(cell.medium_index)
     truth = truth_volume(cell, result, n_med)
     blurred = truth_volume(cell, result, n_med, blur_um=resolution_um)
@@ -192,6 +272,16 @@ def cell_metrics(result, cell, resolution_um) -> dict:
 
 
 def paper_optics(condenser_na=VALIDATION_NA) -> Optics:
+    """The paper's optics at the validation's condenser NA.
+
+    Parameters
+    ----------
+    condenser_na : float
+
+    Returns
+    -------
+    Optics
+    """
     return Optics.paper().replace(condenser_na=condenser_na)
 
 

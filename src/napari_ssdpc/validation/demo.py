@@ -24,6 +24,25 @@ DEMO_FILES = ("bead.tif", "flat.tif", "white.tif", "calibration.json", "calibrat
 
 
 def run_demo(out: Path, optics: Optics | None = None, seed: int = 0, z=(-80.0, 80.0), dz: float = 1.0) -> dict:
+    """``ssdpc demo``: simulate the PMMA bead, calibrate, reconstruct, write and summarise.
+
+    Parameters
+    ----------
+    out : Path
+        Folder for the frames, calibration, RI volume and summary figure.
+    optics : Optics, optional
+        Default the paper's at condenser NA 0.3.
+    seed : int
+    z : (float, float)
+        z range, µm.
+    dz : float
+        µm.
+
+    Returns
+    -------
+    dict
+        The measured numbers and the files written.
+    """
     if optics is None:
         # The paper does not state its condenser NA; 0.3 (sigma 0.75) gives the best 3D phase
         # with this MLA (docs/validation.md, condenser-NA sweep).

@@ -18,7 +18,21 @@ def _plt():
 
 def bead_figure(result, sphere, medium_index, path, title=""):
     """xy, xz and yz slices of the RI through the bead centre, plus lateral and axial RI profiles
-    against the ground truth."""
+    against the ground truth.
+
+    Parameters
+    ----------
+    result : Result
+    sphere : Sphere
+    medium_index : float
+    path : str or Path
+        The PNG.
+    title : str
+
+    Returns
+    -------
+    Path
+    """
     from napari_ssdpc.validation.cases import truth_volume
 
     plt = _plt()

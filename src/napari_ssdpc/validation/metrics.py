@@ -8,7 +8,17 @@ from scipy import ndimage
 
 def fwhm(x, y) -> float:
     """Full width at half maximum of the main peak of ``y(x)`` (linear interpolation).
-    A negative-going peak (e.g. Δn of a low-index bead) is measured on −y."""
+    A negative-going peak (e.g. Δn of a low-index bead) is measured on −y.
+
+    Parameters
+    ----------
+    x, y : ndarray, 1D
+
+    Returns
+    -------
+    float
+        In the unit of ``x`` (NaN without a half-maximum crossing).
+    """
     x = np.asarray(x, float)
     y = np.asarray(y, float)
     if abs(y.min()) > abs(y.max()):
@@ -32,7 +42,19 @@ def fwhm(x, y) -> float:
 
 def peak_region(volume, sign: int = 0, level: float = 0.5, seed=None):
     """Boolean mask of the connected region around the extremum (or ``seed`` index) where
-    sign·volume exceeds ``level`` times the extremum; ``sign`` 0 picks the larger |extremum|."""
+    sign·volume exceeds ``level`` times the extremum; ``sign`` 0 picks the larger |extremum|.
+
+    Parameters
+    ----------
+    volume : ndarray
+    sign : {-1, 0, 1}
+    level : float
+    seed : tuple of int, optional
+
+    Returns
+    -------
+    ndarray, bool
+    """
     v = np.asarray(volume, float)
     if sign == 0:
         sign = 1 if v.max() >= -v.min() else -1
@@ -43,7 +65,20 @@ def peak_region(volume, sign: int = 0, level: float = 0.5, seed=None):
 
 
 def centroid(volume, coords, sign: int = 0, level: float = 0.5, seed=None) -> np.ndarray:
-    """Weighted centroid (in the units of ``coords``, one 1D array per axis) of the peak region."""
+    """Weighted centroid (in the units of ``coords``, one 1D array per axis) of the peak region.
+
+    Parameters
+    ----------
+    volume : ndarray
+    coords : sequence of ndarray, 1D
+    sign : {-1, 0, 1}
+    level : float
+    seed : tuple of int, optional
+
+    Returns
+    -------
+    ndarray, (ndim,)
+    """
     v = np.asarray(volume, float)
     mask = peak_region(v, sign, level, seed)
     w = np.abs(v) * mask
@@ -52,14 +87,37 @@ def centroid(volume, coords, sign: int = 0, level: float = 0.5, seed=None) -> np
 
 
 def line_through(volume, coords, point, axis: int):
-    """Profile of ``volume`` along ``axis`` through the voxel nearest ``point`` (µm per axis)."""
+    """Profile of ``volume`` along ``axis`` through the voxel nearest ``point`` (µm per axis).
+
+    Parameters
+    ----------
+    volume : ndarray
+    coords : sequence of ndarray, 1D
+    point : sequence of float
+    axis : int
+
+    Returns
+    -------
+    x : ndarray
+    values : ndarray
+    """
     idx = [int(np.argmin(np.abs(np.asarray(c) - p))) for c, p in zip(coords, point)]
     sl = tuple(slice(None) if a == axis else i for a, i in enumerate(idx))
     return np.asarray(coords[axis]), np.asarray(volume)[sl]
 
 
 def correlation(a, b, mask=None) -> float:
-    """Pearson correlation of two arrays (inside ``mask``)."""
+    """Pearson correlation of two arrays (inside ``mask``).
+
+    Parameters
+    ----------
+    a, b : ndarray
+    mask : ndarray, bool, optional
+
+    Returns
+    -------
+    float
+    """
     a = np.asarray(a, float)
     b = np.asarray(b, float)
     if mask is not None:

@@ -53,10 +53,12 @@ class Layout:
 
     @property
     def split(self) -> tuple:
+        """(rows, cols) where the fast path's circular grid wraps: view plus half the padding."""
         return tuple(n + (p - n) // 2 for n, p in zip(self.view_shape, self.fft_shape))
 
     @property
     def offset(self) -> tuple:
+        """(rows, cols) the circular grid is rolled by to make it linear."""
         return tuple(p - s for p, s in zip(self.fft_shape, self.split))
 
     @property
@@ -65,20 +67,60 @@ class Layout:
         return self.shape[0] * self.shape[1] / (self.fft_shape[0] * self.fft_shape[1])
 
     def to_linear(self, obj):
-        """Circular object grid (..., P, Q) -> linear (rolled so that position p sits at p + offset)."""
+        """Circular object grid (..., P, Q) -> linear (rolled so that position p sits at p + offset).
+
+        Parameters
+        ----------
+        obj : ndarray, (..., P, Q)
+
+        Returns
+        -------
+        ndarray, (..., P, Q)
+        """
         return np.roll(obj, self.offset, axis=(-2, -1))
 
     def to_circular(self, obj):
+        """Inverse of :meth:`to_linear`.
+
+        Parameters
+        ----------
+        obj : ndarray, (..., P, Q)
+
+        Returns
+        -------
+        ndarray, (..., P, Q)
+        """
         return np.roll(obj, tuple(-o for o in self.offset), axis=(-2, -1))
 
     def windows(self, k):
-        """Canvas slices (rows, cols) of lenslet k's view."""
+        """Canvas slices (rows, cols) of lenslet k's view.
+
+        Parameters
+        ----------
+        k : int
+            Lenslet index.
+
+        Returns
+        -------
+        (slice, slice)
+        """
         (r, c), (oy, ox), (ny, nx) = self.origins[k], self.offset, self.view_shape
         return slice(r + oy, r + oy + ny), slice(c + ox, c + ox + nx)
 
 
 def layout(rec, canvas: str = "sensor") -> Layout:
-    """The spread-EI layout of a fast-path ``Reconstructor`` (with Richardson–Lucy operators)."""
+    """The spread-EI layout of a fast-path ``Reconstructor`` (with Richardson–Lucy operators).
+
+    Parameters
+    ----------
+    rec : Reconstructor
+    canvas : {'sensor', 'compact'}
+        The whole sensor, or the views packed edge to edge.
+
+    Returns
+    -------
+    Layout
+    """
     if canvas not in CANVASES:
         raise SsdpcError(f"unknown canvas '{canvas}'; use one of {', '.join(CANVASES)}")
     if not hasattr(rec, "rl"):
@@ -111,7 +153,20 @@ def _kernels(rec, z, lay: Layout):
 
 def full_frame_psf(kernels, members, lay: Layout) -> np.ndarray:
     """The sensor image of an on-axis point through the lenslets ``members``: each kernel
-    centred on its lenslet's origin (canvas-sized, float32)."""
+    centred on its lenslet's origin (canvas-sized, float32).
+
+    Parameters
+    ----------
+    kernels : ndarray, (K, kh, kw)
+        The lenslets' kernels at one depth.
+    members : sequence of int
+        Lenslets of one half.
+    lay : Layout
+
+    Returns
+    -------
+    ndarray, float32, canvas shape
+    """
     img = np.zeros(lay.shape, np.float32)
     ry, rx = lay.reach
     for k in members:
@@ -143,17 +198,45 @@ class ReferenceRL:
         self.build_seconds = time.perf_counter() - t0
 
     def place(self, views):
-        """Views of the half's lenslets (K_h, ny, nx) -> a canvas image."""
+        """Views of the half's lenslets (K_h, ny, nx) -> a canvas image.
+
+        Parameters
+        ----------
+        views : ndarray, (K_h, ny, nx)
+
+        Returns
+        -------
+        ndarray, float32, canvas shape
+        """
         img = np.zeros(self.lay.shape, np.float32)
         for v, k in zip(views, self.members):
             img[self.lay.windows(k)] = v
         return img
 
     def read(self, img):
+        """The half's views cut out of a canvas image (inverse of :meth:`place`).
+
+        Parameters
+        ----------
+        img : ndarray, canvas shape
+
+        Returns
+        -------
+        ndarray, (K_h, ny, nx)
+        """
         return np.stack([img[self.lay.windows(k)] for k in self.members])
 
     def forward(self, obj):
-        """Σ_z PSF_z ⊛ o_z over the whole canvas, one plane at a time: (Z, P, Q) linear -> canvas."""
+        """Σ_z PSF_z ⊛ o_z over the whole canvas, one plane at a time: (Z, P, Q) linear -> canvas.
+
+        Parameters
+        ----------
+        obj : ndarray, (Z, P, Q)
+
+        Returns
+        -------
+        ndarray, canvas shape
+        """
         acc = np.zeros_like(self.otf[0])
         for i in range(self.z):
             spec = sfft.rfft2(obj[i], s=self.lay.shape, workers=-1)
@@ -162,7 +245,16 @@ class ReferenceRL:
         return sfft.irfft2(acc, s=self.lay.shape, workers=-1)
 
     def adjoint(self, img):
-        """PSF_z ⋆ img over the whole canvas for every plane: canvas -> (Z, P, Q) linear."""
+        """PSF_z ⋆ img over the whole canvas for every plane: canvas -> (Z, P, Q) linear.
+
+        Parameters
+        ----------
+        img : ndarray, canvas shape
+
+        Returns
+        -------
+        ndarray, (Z, P, Q)
+        """
         spec = sfft.rfft2(img, workers=-1)
         p, q = self.lay.fft_shape
         out = np.empty((self.z, p, q), np.float32)
@@ -173,7 +265,17 @@ class ReferenceRL:
         return out
 
     def run(self, views, iterations: int) -> RLResult:
-        """Same start value and update as ``MultiViewRL.run``; returns the (Z, ny, nx) stack."""
+        """Same start value and update as ``MultiViewRL.run``; returns the (Z, ny, nx) stack.
+
+        Parameters
+        ----------
+        views : ndarray, (K_h, ny, nx)
+        iterations : int
+
+        Returns
+        -------
+        RLResult
+        """
         y = self.place(np.asarray(views, np.float32)) * self.mask
         mean = float(np.sum(y) / max(np.sum(self.mask), 1))
         obj = np.full((self.z,) + self.lay.fft_shape, mean / max(self.z, 1), np.float32) * self.support
@@ -191,6 +293,9 @@ class ReferenceRL:
 
 @dataclass
 class ReferenceResult:
+    """The reference path's reconstruction: stacks per half, Δn and phase (Z, ny, nx), the
+    layout used and timings (s)."""
+
     stacks: dict
     delta_n: np.ndarray
     phase: np.ndarray
@@ -203,7 +308,20 @@ def reconstruct_reference(rec, frame, canvas: str = "sensor", progress=None) -> 
 
     Halves are built and run one after the other, so that only one half's full-frame PSFs
     (Z sensor-sized spectra) are held at a time. ``timings``: build_s (PSFs), preprocess_s, rl_s,
-    dpc_s, phase_s."""
+    dpc_s, phase_s.
+
+    Parameters
+    ----------
+    rec : Reconstructor
+        Built with Richardson-Lucy operators.
+    frame : ndarray, (H, W)
+    canvas : {'sensor', 'compact'}
+    progress : callable, optional
+
+    Returns
+    -------
+    ReferenceResult
+    """
     lay = layout(rec, canvas)
     t0 = time.perf_counter()
     views = rec.preprocess(frame)
@@ -236,6 +354,15 @@ def reconstruct_reference(rec, frame, canvas: str = "sensor", progress=None) -> 
 
 
 def max_relative_difference(a, b) -> float:
-    """max |a − b| / max |b| (b the reference)."""
+    """max |a − b| / max |b| (b the reference).
+
+    Parameters
+    ----------
+    a, b : array_like
+
+    Returns
+    -------
+    float
+    """
     a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
     return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-30))

@@ -72,6 +72,7 @@ class CalibrateWidget(Container):
         follow_layers(napari_viewer, self)
 
     def run(self, *_):
+        """Calibrate on the chosen frame layer (at the time slider for a series), in a worker."""
         layer = self.image.value
         if layer is None:
             notify.error("no image layer to calibrate: open a white frame (or the sample data) first")
@@ -102,6 +103,13 @@ class CalibrateWidget(Container):
         return f"calibrated on '{source}'"
 
     def save(self, path):
+        """Write the last calibration.
+
+        Parameters
+        ----------
+        path : str or Path
+            The calibration JSON.
+        """
         if self.calibration is None:
             notify.error("nothing to save: run Calibrate first")
             return

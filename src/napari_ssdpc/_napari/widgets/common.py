@@ -32,7 +32,22 @@ __all__ = [
 
 def image_layer_choices(viewer, ndims=(2, 3), allow_none: str | None = None, prefer: str = ""):
     """Choices callable for a ComboBox of raw image layers: the top of the layer list first, layers
-    whose name contains ``prefer`` before all others (the default choice), then ``allow_none``."""
+    whose name contains ``prefer`` before all others (the default choice), then ``allow_none``.
+
+    Parameters
+    ----------
+    viewer : napari.Viewer
+    ndims : tuple of int
+        Layer dimensionalities offered.
+    allow_none : str, optional
+        Label of a "none" choice.
+    prefer : str
+        Name fragment of the default choice.
+
+    Returns
+    -------
+    callable
+    """
     from napari.layers import Image
 
     def choices(_widget=None):
@@ -50,6 +65,17 @@ def image_layer_choices(viewer, ndims=(2, 3), allow_none: str | None = None, pre
 
 
 def calibration_layer_choices(viewer):
+    """Choices callable for a ComboBox of calibration (EI circles) layers.
+
+    Parameters
+    ----------
+    viewer : napari.Viewer
+
+    Returns
+    -------
+    callable
+    """
+
     def choices(_widget=None):
         return [
             (lyr.name, lyr)
@@ -62,7 +88,13 @@ def calibration_layer_choices(viewer):
 
 def follow_layers(viewer, container: Container):
     """Refresh the container's layer choices when layers come, go, move or are renamed (also when
-    the widget is used outside a dock); a closed widget is left alone."""
+    the widget is used outside a dock); a closed widget is left alone.
+
+    Parameters
+    ----------
+    viewer : napari.Viewer
+    container : magicgui Container
+    """
     ref = weakref.ref(container)
 
     def refresh(*_):
@@ -80,7 +112,17 @@ def follow_layers(viewer, container: Container):
 
 
 def frame_index(viewer, layer) -> int | None:
-    """Time index of ``layer`` (t, y, x) at the viewer's current position; None for a 2D frame."""
+    """Time index of ``layer`` (t, y, x) at the viewer's current position; None for a 2D frame.
+
+    Parameters
+    ----------
+    viewer : napari.Viewer
+    layer : napari Image layer
+
+    Returns
+    -------
+    int or None
+    """
     if layer.ndim < 3:
         return None
     pos = layer.world_to_data(viewer.dims.point)
@@ -133,7 +175,18 @@ def show_layer(viewer, data, kwargs: dict, layer_type: str = "image"):
 
 
 def catching_warnings(fn, *args, **kwargs):
-    """Call fn; show each SsdpcWarning it raises as a napari warning notification."""
+    """Call fn; show each SsdpcWarning it raises as a napari warning notification.
+
+    Parameters
+    ----------
+    fn : callable
+    *args, **kwargs
+        Passed to ``fn``.
+
+    Returns
+    -------
+    What ``fn`` returns.
+    """
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", SsdpcWarning)
         out = fn(*args, **kwargs)
@@ -144,6 +197,18 @@ def catching_warnings(fn, *args, **kwargs):
 
 
 def run_buttons(run_text: str, run_tip: str):
+    """A Run button, a Cancel button and a wrapping status line.
+
+    Parameters
+    ----------
+    run_text : str
+    run_tip : str
+
+    Returns
+    -------
+    run, cancel : PushButton
+    status : Label
+    """
     run = PushButton(text=run_text, tooltip=run_tip)
     cancel = PushButton(text="Cancel", tooltip="stop the running job within one iteration")
     status = Label(value="")

@@ -27,6 +27,8 @@ __all__ = ["JobRunner", "Outcome"]
 
 @dataclass
 class Outcome:
+    """How a job ended: its value, the one-line error of a SsdpcError, or cancelled."""
+
     value: object = None
     error: str | None = None
     cancelled: bool = False
@@ -94,9 +96,26 @@ class JobRunner:
 
     @property
     def running(self) -> bool:
+        """Whether a job is running."""
         return self.worker is not None
 
     def start(self, fn, on_result, label: str):
+        """Run ``fn`` in a worker with progress and Cancel.
+
+        Parameters
+        ----------
+        fn : callable
+            ``fn(progress, should_stop)``, run in a helper thread.
+        on_result : callable
+            ``on_result(value)`` on the main thread; returns the status text.
+        label : str
+            Progress-bar title.
+
+        Returns
+        -------
+        worker or None
+            None when a job is already running.
+        """
         if self.running:
             notify.info(f"{self.title} is already running; cancel it first")
             return None
@@ -117,6 +136,7 @@ class JobRunner:
         return worker
 
     def cancel(self, *_):
+        """Ask the running job to stop (within one iteration)."""
         if self._stop is not None:
             self._stop.set()
             self.status.value = "cancelling…"

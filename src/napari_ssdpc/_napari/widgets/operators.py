@@ -6,7 +6,7 @@ import numpy as np
 from magicgui.widgets import CheckBox, ComboBox, Container, FloatSpinBox, PushButton, SpinBox
 
 from napari_ssdpc._napari import notify
-from napari_ssdpc._napari.reader import result_layer
+from napari_ssdpc._napari.layers import result_layer
 from napari_ssdpc._napari.widgets.common import (
     calibration_layer_choices,
     compact,
@@ -149,7 +149,12 @@ class OperatorsWidget(Container):
         self.model.value, self.method.value = rec["model"], rec["method"]
 
     def show_settings(self, rec: ReconstructionSettings) -> None:
-        """Show loaded reconstruction settings (z grid, model, method, the 'tv' parameters)."""
+        """Show loaded reconstruction settings (z grid, model, method, the 'tv' parameters).
+
+        Parameters
+        ----------
+        rec : ReconstructionSettings
+        """
         self.z_min.value, self.z_max.value, self.dz.value = rec.z_min_um, rec.z_max_um, rec.dz_um
         self.model.value, self.method.value, self.sign.value = rec.model, rec.method, rec.sign
         self.tv_lambda.value = rec.tv_lambda or 0.0
@@ -169,6 +174,13 @@ class OperatorsWidget(Container):
         return [(f"({ln.row}, {ln.col})", i) for i, ln in enumerate(rec.lenslets)]
 
     def operator_settings(self) -> dict:
+        """What this widget sets of the operators (see Session.spec).
+
+        Returns
+        -------
+        dict
+            calibration, z, dz, model, method, stacks and the 'tv' settings.
+        """
         layer = self.calibration.value
         return {
             "calibration": None if layer is None else calibration_of(layer),
@@ -185,6 +197,7 @@ class OperatorsWidget(Container):
         }
 
     def run(self, *_):
+        """Build the operators (a Reconstructor) in a worker."""
         try:
             spec = self.session.spec()
             self.session.remember()
@@ -206,6 +219,7 @@ class OperatorsWidget(Container):
         )
 
     def show_psf(self, *_):
+        """Add the chosen lenslet's PSF stack (z, y, x) as a layer in µm, computed in a worker."""
         rec = self.session.built[1] if self.session.built else None
         if rec is None or getattr(rec, "psf", None) is None:
             notify.error("no PSF operators: tick 'directional stacks' and press Build operators first")

@@ -57,7 +57,16 @@ OPTICS_FIELDS = [
 
 
 def design_text(optics: Optics) -> str:
-    """The design numbers (paper Eqs. 8-14), a few short lines."""
+    """The design numbers (paper Eqs. 8-14), a few short lines.
+
+    Parameters
+    ----------
+    optics : Optics
+
+    Returns
+    -------
+    str
+    """
     d = design(optics)
     return "\n".join(
         [
@@ -144,6 +153,13 @@ class OpticsWidget(Container):
         self.design.value = design_text(optics)
 
     def values(self) -> dict:
+        """The fields' values.
+
+        Returns
+        -------
+        dict
+            Flat optics attributes (``Optics.replace`` keywords).
+        """
         v = {attr: w.value for attr, w in self.fields.items()}
         v["iris_radius_um"] = v["iris_radius_um"] or None
         v["name"] = self.name.value
@@ -165,16 +181,29 @@ class OpticsWidget(Container):
         self.session.set_optics(optics)
 
     def set_optics(self, optics: Optics):
+        """Show ``optics`` and make it the session's (the other widgets reset their defaults).
+
+        Parameters
+        ----------
+        optics : Optics
+        """
         self._show(optics)
         self.session.set_optics(optics, loaded=True)
 
     def load(self, *_):
+        """Read the optics YAML named in the path field."""
         try:
             self.set_optics(catching_warnings(Optics.from_yaml, self.path.value))
         except SsdpcError as e:
             notify.error(e)
 
     def save(self, path):
+        """Write the session's optics as YAML.
+
+        Parameters
+        ----------
+        path : str or Path
+        """
         try:
             self.session.optics.to_yaml(path)
         except OSError as e:

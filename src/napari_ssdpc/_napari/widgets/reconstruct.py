@@ -9,8 +9,8 @@ from magicgui.widgets import CheckBox, ComboBox, Container, FileEdit, FloatSpinB
 from qtpy.QtCore import QTimer
 
 from napari_ssdpc._napari import notify
+from napari_ssdpc._napari.layers import result_layer
 from napari_ssdpc._napari.placement import scale_bar
-from napari_ssdpc._napari.reader import result_layer
 from napari_ssdpc._napari.widgets.common import (
     compact,
     follow_layers,
@@ -149,7 +149,12 @@ class ReconstructWidget(Container):
         self.alpha.value = float(rec["tikhonov_alpha"] or 0.0)
 
     def show_settings(self, rec: ReconstructionSettings) -> None:
-        """Show loaded reconstruction settings (RL iterations, Tikhonov α; 0 = the default)."""
+        """Show loaded reconstruction settings (RL iterations, Tikhonov α; 0 = the default).
+
+        Parameters
+        ----------
+        rec : ReconstructionSettings
+        """
         self.iterations.value = rec.rl_iterations
         self.alpha.value = rec.tikhonov_alpha or 0.0
 
@@ -158,6 +163,13 @@ class ReconstructWidget(Container):
         return {"rl_iterations": int(self.iterations.value)}
 
     def operator_settings(self) -> dict:
+        """What this widget sets of the operators (see Session.spec).
+
+        Returns
+        -------
+        dict
+            ``flat`` (the flat frame's data or None) and ``alpha`` (None: the method's default).
+        """
         flat = self.flat.value
         return {"flat": None if flat is None else flat.data, "alpha": float(self.alpha.value) or None}
 
@@ -166,6 +178,7 @@ class ReconstructWidget(Container):
         return ["ri"] + [name for name, box in self.outputs.items() if box.value]
 
     def run(self, *_):
+        """Reconstruct the current frame, or every frame of a series (in memory or into an OME-Zarr store)."""
         layer = self.raw.value
         if layer is None:
             notify.error("no raw frame: open a light-field frame (or the sample data) first")

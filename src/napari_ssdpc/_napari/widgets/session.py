@@ -58,6 +58,14 @@ class Session:
         setattr(self, role, weakref.ref(widget))
 
     def set_optics(self, optics: Optics, loaded: bool = False):
+        """Make ``optics`` the session's.
+
+        Parameters
+        ----------
+        optics : Optics
+        loaded : bool
+            A new file or preset (the widgets reset their defaults), not an edit.
+        """
         self.optics = optics
         self.optics_changed.emit(optics)
         if loaded:
@@ -137,7 +145,17 @@ class Session:
             pass
 
     def matching(self, spec):
-        """The built Reconstructor if it was made from exactly ``spec``, else None."""
+        """The built Reconstructor if it was made from exactly ``spec``, else None.
+
+        Parameters
+        ----------
+        spec : dict
+            As :meth:`spec` returns it.
+
+        Returns
+        -------
+        Reconstructor or None
+        """
         if self.built is None:
             return None
         old, rec = self.built
@@ -164,6 +182,14 @@ def real_viewer(viewer):
     napari hands every dock widget opened from the Plugins menu its own ``PublicOnlyProxy`` of
     the viewer; keyed on the proxy, each widget would get its own session and never see the
     calibration or the optics another one set.
+
+    Parameters
+    ----------
+    viewer : napari.Viewer or its proxy
+
+    Returns
+    -------
+    napari.Viewer
     """
     while hasattr(type(viewer), "__wrapped__") or type(viewer).__name__ == "PublicOnlyProxy":
         inner = getattr(viewer, "__wrapped__", None)
@@ -174,7 +200,16 @@ def real_viewer(viewer):
 
 
 def session_for(viewer) -> Session:
-    """The Session of ``viewer`` (one per real viewer, created on first use; proxies share it)."""
+    """The Session of ``viewer`` (one per real viewer, created on first use; proxies share it).
+
+    Parameters
+    ----------
+    viewer : napari.Viewer or its proxy
+
+    Returns
+    -------
+    Session
+    """
     viewer = real_viewer(viewer)
     key = id(viewer)
     ref, session = _SESSIONS.get(key, (None, None))
@@ -187,7 +222,17 @@ def session_for(viewer) -> Session:
 
 
 def calibration_of(layer):
-    """The Calibration stored in a calibration layer's metadata (cached on the metadata dict)."""
+    """The Calibration stored in a calibration layer's metadata (cached on the metadata dict).
+
+    Parameters
+    ----------
+    layer : napari layer
+        Made by Calibrate or read from a calibration JSON.
+
+    Returns
+    -------
+    Calibration
+    """
     from napari_ssdpc.calibration.calibrate import Calibration
 
     info = layer.metadata.get("ssdpc", {})
@@ -197,7 +242,18 @@ def calibration_of(layer):
 
 
 def build_reconstructor(spec, progress=None):
-    """A core Reconstructor from a session spec (called in the worker thread)."""
+    """A core Reconstructor from a session spec (called in the worker thread).
+
+    Parameters
+    ----------
+    spec : dict
+        As Session.spec returns it.
+    progress : callable, optional
+
+    Returns
+    -------
+    Reconstructor
+    """
     from napari_ssdpc.reconstruction.pipeline import Reconstructor
 
     if spec["calibration"] is None:
