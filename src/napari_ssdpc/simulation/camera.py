@@ -27,7 +27,29 @@ from napari_ssdpc.errors import SsdpcError
 
 @dataclass(frozen=True)
 class Camera:
-    """Sensor model. ``noise=False`` gives the noise-free (but quantised and clipped) frame."""
+    """Sensor model. ``noise=False`` gives the noise-free (but quantised and clipped) frame.
+
+    Attributes
+    ----------
+    gain_adu_per_e : float
+        Conversion gain, ADU per photo-electron.
+    dark_offset_adu : float
+        Dark (bias) offset added to every pixel, ADU.
+    read_noise_e : float
+        Gaussian read noise, electrons rms.
+    full_well_e : float
+        Full-well capacity, electrons (clipped above).
+    bit_depth : int
+        ADC bits, 1-16; values saturate at ``2**bit_depth - 1`` ADU.
+    exposure_e : float
+        Photo-electrons per pixel at intensity 1.0 (a fully lit EI without sample).
+    falloff : float
+        Relative drop of the Köhler illumination at the field-stop radius, in [0, 1).
+    seed : int or None
+        Seed of the default random generator (None: fresh entropy).
+    noise : bool
+        Add shot and read noise.
+    """
 
     gain_adu_per_e: float = 0.25
     dark_offset_adu: float = 100.0
@@ -61,6 +83,7 @@ class Camera:
         Parameters
         ----------
         rng : numpy.random.Generator or int, optional
+            A generator (returned as it is) or a seed; None: ``seed``.
 
         Returns
         -------
@@ -81,7 +104,7 @@ class Camera:
         Returns
         -------
         ndarray, float64
-            ADU.
+            ADU, shaped like ``intensity``.
         """
         e = np.clip(np.asarray(intensity, dtype=np.float64), 0, None) * self.exposure_e
         e = np.minimum(e, self.full_well_e)
@@ -92,13 +115,15 @@ class Camera:
 
         Parameters
         ----------
-        intensity : ndarray
-            Intensity unit.
+        intensity : ndarray, (H, W)
+            Intensity unit (1 = a fully lit EI without sample).
         rng : numpy.random.Generator or int, optional
+            Generator or seed of the noise; None: ``seed``.
 
         Returns
         -------
-        ndarray, uint16
+        ndarray, uint16, (H, W)
+            ADU.
         """
         intensity = np.asarray(intensity, dtype=np.float64)
         if not np.all(np.isfinite(intensity)):
@@ -124,7 +149,8 @@ class Camera:
 
         Returns
         -------
-        ndarray
+        ndarray, float64
+            Relative illumination in [0, 1], shaped like ``r_um``.
         """
         r = np.asarray(r_um, dtype=np.float64) / float(field_radius_um)
         return np.clip(1.0 - self.falloff * r * r, 0.0, None)

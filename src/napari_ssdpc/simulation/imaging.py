@@ -35,8 +35,10 @@ def lenslet_windows(lenslets, optics, sampling, nc, supersample=8):
     Parameters
     ----------
     lenslets : list of Lenslet
+        The K lenslets.
     optics : Optics
     sampling : Sampling
+        The object grid; its frequency lattice has the step ``sampling.du`` cycles/µm.
     nc : int
         Crop width, lattice units.
     supersample : int
@@ -45,7 +47,9 @@ def lenslet_windows(lenslets, optics, sampling, nc, supersample=8):
     Returns
     -------
     centres : ndarray, int, (K, 2)
+        Lattice index (ix, iy) of each crop centre, the nearest to u_k (units of du).
     apertures : ndarray, float32, (K, nc, nc)
+        Amplitude of A_k on the crop (rows y, columns x), in [0, 1].
     """
     du, rho, cut = sampling.du, optics.subaperture_radius, optics.cutoff
     off = np.arange(nc) - nc // 2
@@ -74,13 +78,31 @@ def crop_size(optics, sampling):
     Returns
     -------
     int
+        Even crop width, lattice units, at most ``sampling.n``.
     """
     nc = even_fast(int(math.ceil(4 * optics.subaperture_radius / sampling.du)) + 4)
     return min(nc, sampling.n)
 
 
 class Imager:
-    """Accumulates the EI intensities of all lenslets over the source points."""
+    """Accumulates the EI intensities of all lenslets over the source points.
+
+    Parameters
+    ----------
+    optics : Optics
+    sampling : Sampling
+        The periodic object grid (n x n samples of ``dx_um`` µm).
+    lenslets : list of Lenslet
+        The K lenslets imaged (as built).
+
+    Attributes
+    ----------
+    nc : int
+        Crop width of the lenslet windows, lattice units.
+    acc : ndarray, float64, (K, nc, nc)
+        Accumulated EI intensities on the crop grid (object frame, period ``sampling.size_um``),
+        intensity unit.
+    """
 
     def __init__(self, optics, sampling, lenslets):
         self.optics, self.sampling, self.lenslets = optics, sampling, lenslets
@@ -106,15 +128,16 @@ class Imager:
         Parameters
         ----------
         v_full : ndarray, complex, (n, n)
-            Exit envelope on the full grid.
+            Exit envelope V on the full grid (FFT order).
         idx : ndarray, int, (2,)
-            Lattice index of the plane wave.
+            Lattice index (ix, iy) of the plane wave, units of du.
         z_exit : float
             Depth of the exit plane, µm.
 
         Returns
         -------
         ndarray, complex, (n, n)
+            Spectrum in FFT order; index i holds the frequency u_i + w of the plane wave w.
         """
         n = self.sampling.n
         if getattr(self, "_z", None) != z_exit:  # exp(i2π z η(u)) P_obj(u) on the absolute lattice
@@ -134,11 +157,12 @@ class Imager:
         Parameters
         ----------
         idx : ndarray, int, (2,)
-            Lattice index of the plane wave.
+            Lattice index (ix, iy) of the plane wave, units of du.
 
         Returns
         -------
         ndarray, complex, (n, n)
+            The iris disk's spectrum (V frame, FFT order), 0 when the wave misses the pupil.
         """
         p = self.pupil[idx[1] % self.sampling.n, idx[0] % self.sampling.n]
         return self.mask_spec if p == 1 else self.mask_spec * p
@@ -149,10 +173,11 @@ class Imager:
         Parameters
         ----------
         spec : ndarray, complex, (n, n)
+            Spectrum after the iris (V frame), from :meth:`image_spectrum` or :meth:`empty_spectrum`.
         idx : ndarray, int, (2,)
-            Lattice index of the plane wave.
+            Lattice index (ix, iy) of the plane wave, units of du.
         weight : float
-            The source point's weight.
+            The source point's weight: the area of its cell inside the condenser disk, (cycles/µm)².
         """
         n = self.sampling.n
         rows = (self.centres[:, 1, None] - idx[1] + self.off[None, :]) % n
@@ -162,7 +187,13 @@ class Imager:
         self.acc += (weight * self.scale) * (f.real**2 + f.imag**2)
 
     def coefficients(self):
-        """Fourier-series coefficients of each EI intensity (object frame, period = grid size)."""
+        """Fourier-series coefficients of each EI intensity (object frame, period = grid size).
+
+        Returns
+        -------
+        ndarray, complex, (K, nc, nc)
+            Coefficients at the frequencies ``fftfreq(nc, size_um / nc)`` cycles/µm, intensity unit.
+        """
         return sfft.fft2(self.acc, axes=(-2, -1), workers=-1) / self.nc**2
 
 
@@ -174,17 +205,21 @@ def render(coeffs, centres, optics, sampling, grid, camera):
     Parameters
     ----------
     coeffs : ndarray, complex, (K, m, m)
-        Fourier coefficients of each EI's intensity.
+        Fourier-series coefficients of each EI's intensity at ``fftfreq(m, size_um / m)``
+        cycles/µm (object frame, period ``sampling.size_um``).
     centres : ndarray, (K, 2)
         EI centres (x, y), px.
     optics : Optics
     sampling : Sampling
     grid : Grid
+        Sensor-to-lattice geometry (pitch, rotation, flips).
     camera : Camera
+        Its illumination fall-off is applied.
 
     Returns
     -------
     ndarray, float64, (H, W)
+        Sensor image, intensity unit, clipped at 0.
     """
     H, W = optics.height_px, optics.width_px
     frame = np.zeros((H, W), dtype=np.float64)
@@ -259,13 +294,16 @@ def array_as_built(optics, grid, camera, array=None):
     grid : Grid, optional
         Default the nominal grid.
     camera : Camera, optional
+        Default ``Camera()``.
     array : ArrayErrors, optional
+        Errors of the array; None: the ideal lattice.
 
     Returns
     -------
     grid : Grid
     camera : Camera
     lenslets : list of Lenslet
+        The K lenslets as built.
     centres : ndarray, (K, 2)
         EI centres (x, y), px.
     """

@@ -56,11 +56,14 @@ class ArrayErrors:
         Parameters
         ----------
         grid : Grid
+            The nominal array on the sensor (pitch, rotation, lattice).
         row, col : int
+            Lattice indices of the lenslet.
 
         Returns
         -------
-        ndarray, (2,)
+        ndarray, float64, (2,)
+            (x, y) on the sensor, px.
         """
         rng = np.random.default_rng([self.seed, row + 10_000, col + 10_000])
         r = self.offset_frac * grid.pitch_px * math.sqrt(rng.uniform())
@@ -77,14 +80,17 @@ class ArrayErrors:
         Parameters
         ----------
         grid : Grid
+            The nominal array on the sensor.
         lenslets : list of Lenslet
+            The K lenslets at their ideal lattice sites.
         optics : Optics
 
         Returns
         -------
         lenslets : list of Lenslet
+            The moved lenslets, same order.
         centres : ndarray, (K, 2)
-            px.
+            EI centres (x, y), px.
         """
         um_per_px = optics.pitch_um / grid.pitch_px
         moved, centres = [], []
@@ -124,6 +130,7 @@ def notch(intensity, centres_px, radius_px, *, angle_deg=60.0, width_deg=30.0, d
     Returns
     -------
     ndarray (H, W) float64
+        Intensity unit.
     """
     out = np.array(intensity, dtype=np.float64)
     r = radius_px * 1.3
@@ -149,18 +156,23 @@ def content(intensity, centres_px, radius_px, *, contrast=1.0, parallax_px=3.0, 
     Parameters
     ----------
     intensity : ndarray, (H, W)
+        Rendered frame, intensity unit.
     centres_px : ndarray, (K, 2)
         EI centres (x, y), px.
     radius_px : float
         EI radius, px.
     contrast : float
+        Relative brightness the blobs add (unitless).
     parallax_px : float
-        Shift of the outermost EI, px.
+        Parallax per x extent of the EI centres: an EI shifts by ``parallax_px`` times its
+        offset from their mean divided by that extent, px.
     seed : int
+        Seed of the texture.
 
     Returns
     -------
     ndarray, float64, (H, W)
+        Intensity unit.
     """
     out = np.array(intensity, dtype=np.float64)
     rng = np.random.default_rng(seed)
@@ -190,11 +202,14 @@ def vignetting(intensity, strength=0.5):
     Parameters
     ----------
     intensity : ndarray, (H, W)
+        Rendered frame, intensity unit.
     strength : float
+        Relative drop at the sensor corners (unitless).
 
     Returns
     -------
-    ndarray, (H, W)
+    ndarray, float64, (H, W)
+        Intensity unit.
     """
     out = np.array(intensity, dtype=np.float64)
     rho, _ = _polar(out.shape, ((out.shape[1] - 1) / 2, (out.shape[0] - 1) / 2))

@@ -39,7 +39,15 @@ class Sampling:
     """The periodic object-space grid: ``n`` x ``n`` samples of ``dx_um``.
 
     Its frequency lattice (spacing ``du = 1 / size_um``) carries the source points,
-    the pupils and the lenslet sub-apertures."""
+    the pupils and the lenslet sub-apertures.
+
+    Attributes
+    ----------
+    n : int
+        Samples per side (even).
+    dx_um : float
+        Sample spacing, µm.
+    """
 
     n: int
     dx_um: float
@@ -81,11 +89,23 @@ class Sampling:
         return 1.0 / self.size_um
 
     def x(self) -> np.ndarray:
-        """Sample positions in FFT order (x = 0 at index 0)."""
+        """Sample positions in FFT order (x = 0 at index 0).
+
+        Returns
+        -------
+        ndarray, float64, (n,)
+            µm.
+        """
         return np.fft.fftfreq(self.n, 1.0 / self.n) * self.dx_um
 
     def u(self) -> np.ndarray:
-        """Frequencies of the grid (FFT order), cycles/µm."""
+        """Frequencies of the grid (FFT order), cycles/µm.
+
+        Returns
+        -------
+        ndarray, float64, (n,)
+            cycles/µm.
+        """
         return np.fft.fftfreq(self.n, self.dx_um)
 
 
@@ -95,6 +115,7 @@ def even_fast(m: int) -> int:
     Parameters
     ----------
     m : int
+        Smallest acceptable size.
 
     Returns
     -------
@@ -114,7 +135,17 @@ class Source:
     cycles/µm for the paper's optics). ``na``: condenser NA (None: the optics'). Each
     point is weighted by the area of its step x step lattice cell inside the disk,
     computed with ``supersample`` x ``supersample`` sub-cells, so the weights sum to
-    the disk area."""
+    the disk area.
+
+    Attributes
+    ----------
+    step : int
+        Spacing of the source points, lattice units (du).
+    na : float or None
+        Condenser NA; None: ``optics.condenser_na``.
+    supersample : int
+        Sub-cells per cell side for the weights of the cells on the disk's edge.
+    """
 
     step: int = 2
     na: float | None = None
@@ -149,9 +180,11 @@ class Source:
         Returns
         -------
         idx : ndarray, int, (K, 2)
+            Lattice indices (ix, iy), units of du.
         w : ndarray, (K, 2)
-            cycles/µm.
+            Plane-wave frequencies (ux, uy), cycles/µm.
         weights : ndarray, (K,)
+            Area of each point's cell inside the disk, (cycles/µm)².
         """
         r = self.radius(optics)
         h = int(self.step)
@@ -185,13 +218,16 @@ def disk_fraction(x, y, radius, pixel, supersample=8):
     x, y : ndarray
         Pixel centres (broadcast), any length unit.
     radius : float
+        Disk radius, same unit.
     pixel : float
-        Pixel side.
+        Pixel side, same unit.
     supersample : int
+        Sub-samples per pixel side for the pixels on the edge.
 
     Returns
     -------
     ndarray, float64
+        Fraction in [0, 1], the broadcast shape of ``x`` and ``y``.
     """
     x, y = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float))
     r = np.hypot(x, y)
@@ -216,19 +252,22 @@ def propagate(field, d_um: float, dx_um: float, wavelength_um: float, n_medium: 
     Parameters
     ----------
     field : ndarray, complex, (ny, nx)
+        The field (or its envelope V for a non-zero ``tilt``).
     d_um : float
-        Distance, µm.
+        Distance, µm (> 0: toward the objective).
     dx_um : float
         Sampling, µm.
     wavelength_um : float
         Vacuum wavelength, µm.
     n_medium : float
+        Refractive index of the medium.
     tilt : (float, float)
-        w, cycles/µm.
+        w (x, y), cycles/µm.
 
     Returns
     -------
     ndarray, complex, (ny, nx)
+        The propagated field (envelope), dtype of ``field`` if complex, else complex128.
     """
     field = np.asarray(field)
     ny, nx = field.shape
@@ -247,7 +286,31 @@ def _propagator(ny, nx, dx_um, d_um, wavelength_um, n_medium, tilt, dtype=np.com
 
 
 class Slabs:
-    """Multislice: the phantom's phase/absorption screens on a sub-grid around it."""
+    """Multislice: the phantom's phase/absorption screens on a sub-grid around it.
+
+    Parameters
+    ----------
+    phantom : Phantom
+        Bound to a medium (:meth:`Phantom.with_medium`).
+    optics : Optics
+    sampling : Sampling
+        The full object grid.
+    dz_um : float
+        Largest slab thickness, µm.
+    supersample : int
+        Lateral sub-samples per pixel side of the voxeliser.
+
+    Attributes
+    ----------
+    ns : int
+        Side of the sub-grid, samples (``sampling.n`` when it would not be smaller).
+    z : list of float
+        Centres of the non-empty slabs, µm, farthest from the objective first.
+    screens : list of ndarray, complex64, (ns, ns)
+        exp(i2π ∫Δn dz / λ) of each non-empty slab.
+    z_exit : float
+        Depth of the last screen, µm.
+    """
 
     def __init__(self, phantom: Phantom, optics: Optics, sampling: Sampling, dz_um=DZ_UM, supersample=4):
         lam, nm, dx = optics.wavelength_um, optics.medium_index, sampling.dx_um
@@ -299,11 +362,12 @@ class Slabs:
         Parameters
         ----------
         tilt : (float, float)
-            Plane-wave frequency w, cycles/µm.
+            Plane-wave frequency w (x, y), cycles/µm.
 
         Returns
         -------
-        ndarray, complex, (ns, ns)
+        ndarray, complex64, (ns, ns)
+            V on the sub-grid.
         """
         v = self.screens[0].copy()
         cache = {}
@@ -320,12 +384,14 @@ class Slabs:
         Parameters
         ----------
         v : ndarray, complex, (ns, ns)
+            Envelope on the sub-grid (from :meth:`exit_envelope`).
         n : int
             Full grid size.
 
         Returns
         -------
         ndarray, complex, (n, n)
+            Envelope on the full grid, FFT order.
         """
         if self.full:
             return v
@@ -344,19 +410,23 @@ def exit_field(
     Parameters
     ----------
     phantom : Phantom
+        The sample; without a medium of its own it takes the optics'.
     optics : Optics
     tilt : (float, float)
-        w, cycles/µm.
+        w (x, y), cycles/µm.
     sampling : Sampling, optional
+        Default ``Sampling.for_optics(optics)``.
     dz_um : float
         Largest slab thickness, µm.
 
     Returns
     -------
     v : ndarray, complex, (n, n)
+        Exit envelope V on the full grid, FFT order.
     z_exit : float
-        µm.
+        Depth of the exit plane, µm.
     sampling : Sampling
+        The grid used.
     """
     phantom = phantom.with_medium(optics.medium_index)
     optics = optics_for(phantom, optics)

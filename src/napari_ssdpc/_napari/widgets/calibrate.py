@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
-from magicgui.widgets import ComboBox, Container, FileEdit, Label, PushButton
+from magicgui.widgets import ComboBox, FileEdit, Label, PushButton
 
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.reader import calibration_layers
 from napari_ssdpc._napari.widgets.common import (
-    compact,
+    StepWidget,
     follow_layers,
     frame_index,
     image_layer_choices,
@@ -17,20 +17,16 @@ from napari_ssdpc._napari.widgets.common import (
     wrap,
 )
 from napari_ssdpc._napari.widgets.jobs import JobRunner
-from napari_ssdpc._napari.widgets.session import session_for
 from napari_ssdpc.errors import SsdpcError
 
 __all__ = ["CalibrateWidget"]
 
 
-class CalibrateWidget(Container):
+class CalibrateWidget(StepWidget):
     """Detect the lenslet grid on an image layer; adds EI circles and centres layers."""
 
     def __init__(self, napari_viewer):
-        super().__init__(labels=True, scrollable=True)
-        compact(self)
-        self.viewer = napari_viewer
-        self.session = session_for(napari_viewer)
+        super().__init__(napari_viewer)
         self.image = ComboBox(
             label="frame",
             choices=image_layer_choices(napari_viewer, prefer="white"),

@@ -18,6 +18,7 @@ MIN_DOCK_HEIGHT_PX = 80
 
 __all__ = [
     "MIN_DOCK_HEIGHT_PX",
+    "StepWidget",
     "compact",
     "calibration_layer_choices",
     "catching_warnings",
@@ -252,3 +253,25 @@ def compact(container: Container) -> Container:
     """
     container.root_native_widget.setMinimumHeight(MIN_DOCK_HEIGHT_PX)  # the scroll area around ``native``
     return container
+
+
+class StepWidget(Container):
+    """A step of the workflow: a scrolling container that works on the viewer's shared session.
+
+    Parameters
+    ----------
+    napari_viewer : napari.Viewer
+        The viewer (or napari's proxy of it).
+    role : str, optional
+        The session's slot for this kind of step ('operators_widget', 'reconstruct_widget'):
+        when the dock and a separate widget of the same kind are open, the one edited last counts.
+    """
+
+    def __init__(self, napari_viewer, role: str | None = None):
+        super().__init__(labels=True, scrollable=True)
+        compact(self)
+        self.viewer = napari_viewer
+        self.session = session_for(napari_viewer)
+        if role is not None:
+            self.session.use(role, self)
+            self.changed.connect(lambda *_: self.session.use(role, self))

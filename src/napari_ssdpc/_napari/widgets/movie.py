@@ -9,10 +9,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from magicgui.widgets import ComboBox, Container, FileEdit, SpinBox
+from magicgui.widgets import ComboBox, FileEdit, SpinBox
 
 from napari_ssdpc._napari import notify
-from napari_ssdpc._napari.widgets.common import compact, follow_layers, run_buttons
+from napari_ssdpc._napari.widgets.common import StepWidget, follow_layers, run_buttons
 
 __all__ = ["MOVIE_KINDS", "MovieWidget", "export_movie"]
 
@@ -70,7 +70,7 @@ def export_movie(viewer, layer, path, kind: str = "turn in 3D", seconds: float =
     return path
 
 
-class MovieWidget(Container):
+class MovieWidget(StepWidget):
     """Export a movie of a reconstruction: a turn in 3D, or a time series played through.
 
     Parameters
@@ -79,9 +79,7 @@ class MovieWidget(Container):
     """
 
     def __init__(self, napari_viewer):
-        super().__init__(labels=True, scrollable=True)
-        compact(self)
-        self.viewer = napari_viewer
+        super().__init__(napari_viewer)
         self.layer = ComboBox(label="volume", choices=self._results, tooltip="the reconstruction layer to film")
         self.kind = ComboBox(
             label="movie",

@@ -3,19 +3,19 @@
 from __future__ import annotations
 
 import numpy as np
-from magicgui.widgets import CheckBox, ComboBox, Container, FloatSpinBox, PushButton, SpinBox
+from magicgui.widgets import CheckBox, ComboBox, FloatSpinBox, PushButton, SpinBox
 
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.layers import result_layer
 from napari_ssdpc._napari.widgets.common import (
+    StepWidget,
     calibration_layer_choices,
-    compact,
     follow_layers,
     run_buttons,
     show_layer,
 )
 from napari_ssdpc._napari.widgets.jobs import JobRunner
-from napari_ssdpc._napari.widgets.session import build_reconstructor, calibration_of, session_for
+from napari_ssdpc._napari.widgets.session import build_reconstructor, calibration_of
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.settings.base import field_range
 from napari_ssdpc.settings.reconstruction import PHASE_METHODS, SIGNS, TRANSFER_MODELS, ReconstructionSettings
@@ -23,16 +23,11 @@ from napari_ssdpc.settings.reconstruction import PHASE_METHODS, SIGNS, TRANSFER_
 __all__ = ["OperatorsWidget"]
 
 
-class OperatorsWidget(Container):
+class OperatorsWidget(StepWidget):
     """z range, dz and model; builds the PSFs and transfer functions once (a Reconstructor)."""
 
     def __init__(self, napari_viewer):
-        super().__init__(labels=True, scrollable=True)
-        compact(self)
-        self.viewer = napari_viewer
-        self.session = session_for(napari_viewer)
-        self.session.use("operators_widget", self)
-        self.changed.connect(lambda *_: self.session.use("operators_widget", self))  # the one edited last counts
+        super().__init__(napari_viewer, "operators_widget")
         rec = ReconstructionSettings().to_dict()
         self.calibration = ComboBox(
             label="calibration",

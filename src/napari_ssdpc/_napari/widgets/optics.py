@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import textwrap
 
-from magicgui.widgets import CheckBox, Container, FileEdit, FloatSpinBox, Label, LineEdit, PushButton, SpinBox
+from magicgui.widgets import CheckBox, FileEdit, FloatSpinBox, Label, LineEdit, PushButton, SpinBox
 
 from napari_ssdpc._napari import notify
-from napari_ssdpc._napari.widgets.common import catching_warnings, compact, wrap
-from napari_ssdpc._napari.widgets.session import session_for
+from napari_ssdpc._napari.widgets.common import StepWidget, catching_warnings, wrap
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.design import design, design_warnings
 from napari_ssdpc.settings.optics import Optics
@@ -87,14 +86,11 @@ def design_text(optics: Optics) -> str:
     )
 
 
-class OpticsWidget(Container):
+class OpticsWidget(StepWidget):
     """Load, edit and save the optics; the design numbers update live."""
 
     def __init__(self, napari_viewer):
-        super().__init__(labels=True, scrollable=True)
-        compact(self)
-        self.viewer = napari_viewer
-        self.session = session_for(napari_viewer)
+        super().__init__(napari_viewer)
         self.fields = {}
         for attr, label, tip, spec in OPTICS_FIELDS:
             if spec == "bool":

@@ -5,14 +5,14 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from magicgui.widgets import CheckBox, ComboBox, Container, FileEdit, FloatSpinBox, SpinBox
+from magicgui.widgets import CheckBox, ComboBox, FileEdit, FloatSpinBox, SpinBox
 from qtpy.QtCore import QTimer
 
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.layers import result_layer
 from napari_ssdpc._napari.placement import scale_bar
 from napari_ssdpc._napari.widgets.common import (
-    compact,
+    StepWidget,
     follow_layers,
     frame_index,
     image_layer_choices,
@@ -20,7 +20,7 @@ from napari_ssdpc._napari.widgets.common import (
     show_layer,
 )
 from napari_ssdpc._napari.widgets.jobs import JobRunner
-from napari_ssdpc._napari.widgets.session import build_reconstructor, session_for
+from napari_ssdpc._napari.widgets.session import build_reconstructor
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.reconstruction.outputs import QUANTITIES
 from napari_ssdpc.settings.reconstruction import ReconstructionSettings
@@ -59,16 +59,11 @@ def result_arrays(res, wanted) -> dict:
     return out
 
 
-class ReconstructWidget(Container):
+class ReconstructWidget(StepWidget):
     """Reconstruct the current frame, or every frame of a (t, y, x) series, into RI layers."""
 
     def __init__(self, napari_viewer):
-        super().__init__(labels=True, scrollable=True)
-        compact(self)
-        self.viewer = napari_viewer
-        self.session = session_for(napari_viewer)
-        self.session.use("reconstruct_widget", self)
-        self.changed.connect(lambda *_: self.session.use("reconstruct_widget", self))  # the one edited last counts
+        super().__init__(napari_viewer, "reconstruct_widget")
         rec = ReconstructionSettings().to_dict()
         self.raw = ComboBox(
             label="raw frame(s)",
