@@ -93,7 +93,7 @@ def main():
 
     # calibrate on the white frame
     cal_w = tabs["Calibrate"]
-    dock.tab_widget.setCurrentIndex(1)
+    dock.tab_widget.setCurrentIndex(list(tabs).index("Calibrate"))
     cal_w.image.value = viewer.layers["PMMA bead white"]
     stalls.label, t0 = "calibrating", time.perf_counter()
     cal_w.run()
@@ -111,11 +111,11 @@ def main():
 
     # method and reconstruct (RI)
     op_w, rec_w = tabs["Method"], tabs["Reconstruct"]
-    dock.tab_widget.setCurrentIndex(2)
+    dock.tab_widget.setCurrentIndex(list(tabs).index("Method"))
     op_w.calibration.value = viewer.layers["PMMA bead white EI circles"]
     op_w.z_min.value, op_w.z_max.value, op_w.dz.value = Z[0], Z[1], DZ
     op_w.sign.value = "lighter"  # PMMA in oil
-    dock.tab_widget.setCurrentIndex(3)
+    dock.tab_widget.setCurrentIndex(list(tabs).index("Reconstruct"))
     rec_w.raw.value = viewer.layers["PMMA bead"]
     rec_w.flat.value = viewer.layers["PMMA bead flat"]
     stalls.label, t0 = "reconstructing", time.perf_counter()
@@ -131,6 +131,9 @@ def main():
     viewer.axes.visible = True  # z, y, x arrows in the corner
     viewer.reset_view(layers=[ri])
     viewer.camera.angles = (-20, 35, 140)
+    dock.tab_widget.setCurrentIndex(list(tabs).index("Slices"))  # xz and yz sections beside the volume
+    tabs["Slices"].layer.value = ri
+    tabs["Slices"].update()
     app.processEvents()
     grab(viewer, OUT / "napari_3d.png")
 
@@ -166,7 +169,7 @@ def main():
 
     # line profiles: an xy line through the bead, and an axial (xz) line drawn in the xz view
     prof = tabs["Profile"]
-    dock.tab_widget.setCurrentIndex(4)
+    dock.tab_widget.setCurrentIndex(list(tabs).index("Profile"))
     prof.image.value = ri
     lines = prof.new_line_layer()
     to_vox = lambda p: (np.asarray(p) - ri.translate) / ri.scale  # noqa: E731, RUF100

@@ -114,3 +114,33 @@ def test_every_package_declares_its_public_api(package):
     submodules = {p.stem for p in package.glob("*.py")} | {p.name for p in package.iterdir() if p.is_dir()}
     unknown = [n for n in names if n not in defined and n not in submodules]
     assert names and not unknown, f"{package.name}: __all__ lists {unknown}, which it does not import"
+
+
+#: The most lines of code (docstrings, comments and blank lines aside) one module may hold.
+MAX_CODE_LINES = 400
+
+
+def _code_lines(path: Path) -> int:
+    import io
+    import tokenize
+
+    src = path.read_text()
+    docs = set()
+    for node in ast.walk(ast.parse(src)):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and node.body:
+            first = node.body[0]
+            if isinstance(first, ast.Expr) and isinstance(getattr(first, "value", None), ast.Constant):
+                docs.update(range(first.lineno, first.end_lineno + 1))
+    skip = (tokenize.COMMENT, tokenize.NL, tokenize.NEWLINE, tokenize.INDENT, tokenize.DEDENT, tokenize.ENDMARKER)
+    lines = set()
+    for tok in tokenize.generate_tokens(io.StringIO(src).readline):
+        if tok.type not in skip:
+            lines.update(n for n in range(tok.start[0], tok.end[0] + 1) if n not in docs)
+    return len(lines)
+
+
+@pytest.mark.parametrize("path", MODULES, ids=lambda p: str(p.relative_to(PKG)))
+def test_modules_stay_small(path):
+    """One concern per module: none holds more than MAX_CODE_LINES lines of code."""
+    n = _code_lines(path)
+    assert n <= MAX_CODE_LINES, f"{path.name}: {n} lines of code (at most {MAX_CODE_LINES}); split it by concern"

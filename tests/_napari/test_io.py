@@ -125,7 +125,7 @@ def test_calibration_reader_circles_and_labelled_centres(tmp_path):
     optics = Optics.paper()
     cal = calibrate(white_frame(optics, rng=np.random.default_rng(5)), optics)
     p = cal.to_json(tmp_path / "calib.json")
-    (shapes, skw, sk), (pts, pkw, pk) = _layers(p, _reader.get_calibration_reader)
+    (shapes, skw, sk), (pts, pkw, pk), (arrows, vkw, vk) = _layers(p, _reader.get_calibration_reader)
     k = len(cal.lenslets)
     assert (sk, pk) == ("shapes", "points") and skw["shape_type"] == "ellipse" and len(shapes) == k
     centre = shapes[0].mean(axis=0)  # ellipse corners -> centre (y, x)
@@ -136,6 +136,12 @@ def test_calibration_reader_circles_and_labelled_centres(tmp_path):
     ln = cal.lenslets[3]
     assert pkw["features"]["label"][3] == f"({ln.row}, {ln.col})" and pkw["features"]["label"][k] == "axis"
     assert skw["metadata"]["ssdpc"]["calibration"] == json.loads(p.read_text())
+    # each measured centre's deviation from the lattice, as a magnified arrow from its lattice site
+    gain = vkw["metadata"]["ssdpc"]["deviation_gain"]
+    ok = np.isfinite(cal.deviation_px).all(axis=1)
+    assert vk == "vectors" and arrows.shape == (ok.sum(), 2, 2) and gain >= 1
+    assert np.allclose((arrows[:, 0] + arrows[:, 1] / gain)[:, ::-1], cal.centres_px[ok], atol=1e-9)
+    assert np.isclose(np.hypot(*arrows[:, 1].T).max(), cal.ei_radius_px / 3) or gain in (1.0, 500.0)
 
 
 # ------------------------------------------------------------------ results: writer

@@ -223,3 +223,32 @@ def test_optics_widget_design_numbers_are_live(make_napari_viewer, tmp_path):
     ow.fields["condenser_na"].value = 0.3  # sigma 0.75: the outer rings straddle it
     d = design(_widgets.session_for(viewer).optics)
     assert "⚠" not in ow.design.value and f"axial FWHM {d['expected_axial_fwhm_um']:.1f} µm" in ow.design.value
+
+
+def test_manual_calibration_from_guide_points(make_napari_viewer, qtbot, bead, errors):
+    """The manual path: points clicked near a few EI centres (3 px off), or the EI centres of a
+    calibration dragged in the viewer, guide the calibration, which refines to the same lattice."""
+    frame, flat, white, optics = bead
+    viewer = make_napari_viewer()
+    w = _setup_bead(viewer, qtbot, optics)  # calibrated automatically on the white frame
+    auto = w["calibrate"].calibration
+    cw = w["calibrate"]
+    points = cw.add_guide_points()
+    assert cw.guide.value is points and points.mode == "add" and np.allclose(points.scale, cw.image.value.scale)
+    rng = np.random.default_rng(3)
+    picked = auto.centres_px[[5, 9, 14, 20, 26]] + rng.uniform(-3, 3, (5, 2))  # (x, y) px
+    points.data = picked[:, ::-1]  # the points layer sits on the frame: data = (row, col)
+    cw.run()
+    _steps.wait_for(qtbot, cw)
+    guided = cw.calibration
+    assert errors == [] and guided is not auto and guided.kind_evidence["guided"]
+    assert np.abs(guided.centres_px - auto.centres_px).max() < 0.05
+    assert np.hypot(*(np.subtract(guided.grid.axis_px, auto.grid.axis_px))) < 0.05
+    # a calibration's own centres layer as the guide (its optical-axis point is left out)
+    cw.guide.value = viewer.layers["PMMA bead white EI centres"]
+    cw.run()
+    _steps.wait_for(qtbot, cw)
+    assert errors == [] and np.abs(cw.calibration.centres_px - auto.centres_px).max() < 0.05
+    # an empty guide layer is refused with the fix
+    cw.guide.value = cw.add_guide_points()
+    assert cw.run() is None and "holds no points" in errors[-1]

@@ -190,8 +190,10 @@ def read_calibration(path):
 
 def calibration_layers(cal, name: str) -> list:
     """Layer data of a calibration: a Shapes layer of EI circles (green: at least half inside the
-    pupil, orange: clipped edge lenslets) and Points of the EI centres labelled (row, col), plus
-    the optical axis. Both carry the calibration dict in ``metadata['ssdpc']['calibration']``.
+    pupil, orange: clipped edge lenslets), Points of the EI centres labelled (row, col) plus the
+    optical axis, and Vectors of each measured centre's deviation from the lattice (magnified by
+    ``metadata['ssdpc']['deviation_gain']``). All carry the calibration dict in
+    ``metadata['ssdpc']['calibration']``.
 
     Parameters
     ----------
@@ -243,7 +245,19 @@ def calibration_layers(cal, name: str) -> list:
         },
         "points",
     )
-    return [shapes, points]
+    start, arrow, gain = cal.deviation_arrows()
+    vectors = (
+        np.stack([start[:, ::-1], arrow[:, ::-1]], axis=1).reshape(-1, 2, 2),  # (M, [position, arrow], (y, x))
+        {
+            "name": f"{name} EI deviations",  # magnified: see the metadata
+            "edge_color": "cyan",
+            "edge_width": 2,
+            "vector_style": "arrow",
+            "metadata": {"ssdpc": {**meta["ssdpc"], "deviation_gain": gain}},
+        },
+        "vectors",
+    )
+    return [shapes, points, vectors]
 
 
 # ======================================================================= reconstructions

@@ -12,8 +12,9 @@ from napari_ssdpc.files import atomic_write
 
 
 def overlay_png(frame, calibration: Calibration, path, *, dpi: int = 110) -> Path:
-    """PNG of the frame with the detected EI circles, (row, col) labels and the optical
-    axis (red +), cropped to the lenslets in the pupil. Written atomically.
+    """PNG of the frame with the detected EI circles, (row, col) labels, each measured centre's
+    deviation from the lattice (cyan arrows, magnified) and the optical axis (red +), cropped to
+    the lenslets in the pupil. Written atomically.
 
     Parameters
     ----------
@@ -57,6 +58,9 @@ def overlay_png(frame, calibration: Calibration, path, *, dpi: int = 110) -> Pat
             fontsize=7,
             bbox=label_box,
         )
+    start, arrow, gain = cal.deviation_arrows()
+    if len(start):  # each EI centre's deviation from the lattice, magnified
+        ax.quiver(*start.T, *arrow.T, angles="xy", scale_units="xy", scale=1, color="cyan", width=0.003)
     ax.plot(*g.axis_px, "r+", ms=18, mew=2)
     r_pupil = cal.optics.pupil_radius_mla_um / cal.optics.pitch_um * g.pitch_px
     ax.add_patch(Circle(g.axis_px, r_pupil, fill=False, color="red", lw=0.8, ls="--"))
@@ -65,8 +69,8 @@ def overlay_png(frame, calibration: Calibration, path, *, dpi: int = 110) -> Pat
     ax.set_ylim(max(c[:, 1].max(), g.axis_px[1] + r_pupil) + m, min(c[:, 1].min(), g.axis_px[1] - r_pupil) - m)
     ax.set_title(
         f"{cal.kind} frame: axis ({g.axis_px[0]:.2f}, {g.axis_px[1]:.2f}) px, pitch {g.pitch_px:.3f} px, "
-        f"rotation {g.rotation_deg:+.3f}°\nlattice rms {cal.residual_px:.3f} px; green: ≥50% inside pupil, "
-        "orange: edge; red: optical axis and pupil",
+        f"rotation {g.rotation_deg:+.3f}°, lattice rms {cal.residual_px:.3f} px\ngreen: ≥50% inside pupil, "
+        f"orange: edge; red: optical axis and pupil; cyan: deviation from the lattice x {gain:.0f}",
         fontsize=9,
     )
     ax.set_xlabel("x (px)")

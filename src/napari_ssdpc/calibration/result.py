@@ -91,6 +91,24 @@ class Calibration:
         d = d[np.isfinite(d)]
         return float(d.max()) if d.size else 0.0
 
+    def deviation_arrows(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """Arrows that show each measured EI centre's deviation from the lattice, magnified.
+
+        Returns
+        -------
+        start : ndarray, (M, 2)
+            Lattice positions (x, y) of the measured lenslets, px.
+        arrow : ndarray, (M, 2)
+            Their deviations (x, y) times ``gain``, px.
+        gain : float
+            Magnification: the longest arrow is a third of the EI radius (1 to 500).
+        """
+        dev = np.asarray(self.deviation_px, float)
+        ok = np.isfinite(dev).all(axis=1)
+        start = np.asarray(self.centres_px, float)[ok] - dev[ok]
+        gain = float(np.clip(self.ei_radius_px / 3 / max(self.max_deviation_px, 1e-9), 1.0, 500.0))
+        return start, dev[ok] * gain, gain
+
     # ------------------------------------------------------------- table
     @property
     def table(self) -> list[dict]:

@@ -27,204 +27,20 @@ import numpy as np
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.settings.optics import Optics
-
-
-# ----------------------------------------------------------------------------- primitives
-@dataclass(frozen=True)
-class Ellipsoid:
-    """Ellipsoid with constant complex Δn, semi-axes (a, b, c) along x', y', z;
-    x', y' are x, y rotated by ``angle_deg`` about z."""
-
-    center_um: tuple[float, float, float]
-    semi_axes_um: tuple[float, float, float]
-    dn: complex
-    angle_deg: float = 0.0
-
-    def _lateral_q(self, y, x):
-        cx, cy, _ = self.center_um
-        a, b, _ = self.semi_axes_um
-        t = math.radians(self.angle_deg)
-        dx, dy = x - cx, y - cy
-        xr = dx * math.cos(t) + dy * math.sin(t)
-        yr = -dx * math.sin(t) + dy * math.cos(t)
-        return (xr / a) ** 2 + (yr / b) ** 2
-
-    def delta_n(self, z, y, x):
-        """Δn of the primitive at points (z, y, x) µm.
-
-        Parameters
-        ----------
-        z, y, x : array_like
-            Positions, µm (broadcast together).
-
-        Returns
-        -------
-        ndarray, complex
-            Δn (imaginary part: absorption) at each point.
-        """
-        z, y, x = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (z, y, x)))
-        c, cz = self.semi_axes_um[2], self.center_um[2]
-        inside = self._lateral_q(y, x) + ((z - cz) / c) ** 2 <= 1.0
-        return np.where(inside, complex(self.dn), 0j)
-
-    def z_range(self):
-        """z extent of the primitive.
-
-        Returns
-        -------
-        (float, float)
-            z_min, z_max, µm.
-        """
-        return self.center_um[2] - self.semi_axes_um[2], self.center_um[2] + self.semi_axes_um[2]
-
-    def xy_box(self):
-        """Lateral bounding box of the primitive.
-
-        Returns
-        -------
-        (float, float, float, float)
-            x_min, x_max, y_min, y_max, µm.
-        """
-        a, b, _ = self.semi_axes_um
-        t = math.radians(self.angle_deg)
-        hx = math.hypot(a * math.cos(t), b * math.sin(t))
-        hy = math.hypot(a * math.sin(t), b * math.cos(t))
-        cx, cy, _ = self.center_um
-        return cx - hx, cx + hx, cy - hy, cy + hy
-
-    def slab(self, z0, z1, y, x, pixel_um, supersample=4):
-        """Pixel-averaged ∫Δn dz over [z0, z1]: exact chord in z, supersampled laterally.
-
-        Parameters
-        ----------
-        z0, z1 : float
-            Slab bounds, µm.
-        y, x : ndarray
-            Pixel centres, µm (broadcast to the image).
-        pixel_um : float
-            Pixel side, µm.
-        supersample : int
-            Sub-samples per pixel side.
-
-        Returns
-        -------
-        ndarray, complex
-            ∫ Δn dz per pixel, µm.
-        """
-        out = np.zeros((len(y), len(x)), dtype=np.complex128)
-        zlo, zhi = self.z_range()
-        if z1 <= zlo or z0 >= zhi:
-            return out
-        ys, xs = _window(y, x, self.xy_box(), pixel_um)
-        if ys.stop <= ys.start or xs.stop <= xs.start:
-            return out
-        c, cz = self.semi_axes_um[2], self.center_um[2]
-        offs = ((np.arange(supersample) + 0.5) / supersample - 0.5) * pixel_um
-        acc = np.zeros((ys.stop - ys.start, xs.stop - xs.start))
-        yy, xx = np.asarray(y)[ys], np.asarray(x)[xs]
-        for oy in offs:
-            for ox in offs:
-                q = self._lateral_q((yy + oy)[:, None], (xx + ox)[None, :])
-                h = c * np.sqrt(np.clip(1.0 - q, 0.0, None))
-                length = np.minimum(z1, cz + h) - np.maximum(z0, cz - h)
-                acc += np.where(q < 1.0, np.clip(length, 0.0, None), 0.0)
-        out[ys, xs] = acc * (complex(self.dn) / supersample**2)
-        return out
-
-
-@dataclass(frozen=True)
-class Box:
-    """Axis-aligned box with constant complex Δn (exact partial-volume voxelisation)."""
-
-    center_um: tuple[float, float, float]
-    size_um: tuple[float, float, float]
-    dn: complex
-
-    def delta_n(self, z, y, x):
-        """Δn of the primitive at points (z, y, x) µm.
-
-        Parameters
-        ----------
-        z, y, x : array_like
-            Positions, µm (broadcast together).
-
-        Returns
-        -------
-        ndarray, complex
-            Δn (imaginary part: absorption) at each point.
-        """
-        z, y, x = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (z, y, x)))
-        inside = np.ones(z.shape, dtype=bool)
-        for v, c, s in zip((x, y, z), self.center_um, self.size_um):
-            inside &= np.abs(v - c) <= s / 2
-        return np.where(inside, complex(self.dn), 0j)
-
-    def z_range(self):
-        """z extent of the primitive.
-
-        Returns
-        -------
-        (float, float)
-            z_min, z_max, µm.
-        """
-        return self.center_um[2] - self.size_um[2] / 2, self.center_um[2] + self.size_um[2] / 2
-
-    def xy_box(self):
-        """Lateral bounding box of the primitive.
-
-        Returns
-        -------
-        (float, float, float, float)
-            x_min, x_max, y_min, y_max, µm.
-        """
-        (cx, cy, _), (sx, sy, _) = self.center_um, self.size_um
-        return cx - sx / 2, cx + sx / 2, cy - sy / 2, cy + sy / 2
-
-    def slab(self, z0, z1, y, x, pixel_um, supersample=4):
-        """Pixel-averaged ∫Δn dz over [z0, z1].
-
-        Parameters
-        ----------
-        z0, z1 : float
-            Slab bounds, µm.
-        y, x : ndarray
-            Pixel centres, µm (broadcast to the image).
-        pixel_um : float
-            Pixel side, µm.
-        supersample : int
-            Sub-samples per pixel side.
-
-        Returns
-        -------
-        ndarray, complex
-            ∫ Δn dz per pixel, µm.
-        """
-        zlo, zhi = self.z_range()
-        length = max(0.0, min(z1, zhi) - max(z0, zlo))
-        fx = _interval_fraction(np.asarray(x, float), pixel_um, self.center_um[0], self.size_um[0])
-        fy = _interval_fraction(np.asarray(y, float), pixel_um, self.center_um[1], self.size_um[1])
-        return (length * complex(self.dn)) * np.outer(fy, fx)
-
-
-def _interval_fraction(c, pixel, center, size):
-    """Fraction of the pixels [c - p/2, c + p/2] covered by [center - size/2, center + size/2]."""
-    lo = np.maximum(c - pixel / 2, center - size / 2)
-    hi = np.minimum(c + pixel / 2, center + size / 2)
-    return np.clip(hi - lo, 0.0, None) / pixel
-
-
-def _window(y, x, box, pixel):
-    """Index slices of the 1D coordinates that can touch the lateral box."""
-    x0, x1, y0, y1 = box
-    x, y = np.asarray(x), np.asarray(y)
-    xs = slice(int(np.searchsorted(x, x0 - pixel)), int(np.searchsorted(x, x1 + pixel, side="right")))
-    ys = slice(int(np.searchsorted(y, y0 - pixel)), int(np.searchsorted(y, y1 + pixel, side="right")))
-    return ys, xs
+from napari_ssdpc.simulation.primitives import Box, Ellipsoid
 
 
 # ------------------------------------------------------------------------------ phantoms
 class Phantom:
-    """Base class: a sum of primitives with Δn relative to the medium."""
+    """Base class: a sum of primitives with Δn relative to the medium.
+
+    Attributes
+    ----------
+    medium_index : float or None
+        The phantom's own medium; None: the optics' medium.
+    needs_medium : bool
+        False when Δn is given relative to any medium (``Composite``, ``BarTarget``).
+    """
 
     medium_index: float | None = None
     needs_medium = True  # False: Δn is given relative to any medium (Composite, BarTarget)
@@ -292,10 +108,12 @@ class Phantom:
         z, y, x : array_like
             Positions, µm (broadcast together).
         medium_index : float, optional
+            Used when the phantom has none of its own.
 
         Returns
         -------
-        ndarray, complex
+        ndarray, complex128
+            Δn (imaginary part: absorption index κ), the broadcast shape.
         """
         shape = np.broadcast_shapes(np.shape(z), np.shape(y), np.shape(x))
         out = np.zeros(shape, dtype=np.complex128)
@@ -309,10 +127,12 @@ class Phantom:
         Parameters
         ----------
         medium_index : float
+            Used to build the parts when the phantom has no medium of its own.
 
         Returns
         -------
         (float, float)
+            z_min, z_max, µm.
         """
         rs = [p.z_range() for p in self.parts(self._any_medium(medium_index))]
         return min(r[0] for r in rs), max(r[1] for r in rs)
@@ -323,10 +143,12 @@ class Phantom:
         Parameters
         ----------
         medium_index : float
+            Used to build the parts when the phantom has no medium of its own.
 
         Returns
         -------
         (float, float, float, float)
+            x_min, x_max, y_min, y_max, µm.
         """
         bs = [p.xy_box() for p in self.parts(self._any_medium(medium_index))]
         return (min(b[0] for b in bs), max(b[1] for b in bs), min(b[2] for b in bs), max(b[3] for b in bs))
@@ -341,18 +163,19 @@ class Phantom:
         ----------
         z0, z1 : float
             Slab bounds, µm.
-        y, x : ndarray
-            Pixel centres, µm.
+        y, x : ndarray, 1D
+            Pixel centres, µm, ascending.
         pixel_um : float
             Pixel side, µm.
         medium_index : float, optional
+            Used when the phantom has none of its own.
         supersample : int
             Sub-samples per pixel side.
 
         Returns
         -------
-        ndarray, complex
-            µm.
+        ndarray, complex128, (len(y), len(x))
+            ∫ Δn dz per pixel, µm.
         """
         out = np.zeros((len(y), len(x)), dtype=np.complex128)
         for p in self._parts(medium_index):
@@ -365,14 +188,16 @@ class Phantom:
         Parameters
         ----------
         z_um, y_um, x_um : ndarray, 1D
-            Voxel centres, µm.
+            Voxel centres, µm, evenly spaced (the same spacing in y and x).
         medium_index : float, optional
+            Used when the phantom has none of its own.
         supersample : int
-            Sub-samples per voxel side.
+            Lateral sub-samples per voxel side.
 
         Returns
         -------
-        ndarray, complex, (Z, Y, X)
+        ndarray, complex128, (Z, Y, X)
+            Voxel-averaged Δn (imaginary part: absorption index κ).
         """
         z, y, x = (np.asarray(v, dtype=float) for v in (z_um, y_um, x_um))
         dz = float(z[1] - z[0]) if len(z) > 1 else 1.0
@@ -385,7 +210,14 @@ class Phantom:
 
 @dataclass(frozen=True)
 class Composite(Phantom):
-    """Any sum of primitives (``Ellipsoid``, ``Box``) whose ``dn`` is already relative to the medium."""
+    """Any sum of primitives (``Ellipsoid``, ``Box``) whose ``dn`` is already relative to the medium.
+
+    Attributes
+    ----------
+    items : tuple of Ellipsoid or Box
+    medium_index : float or None
+        The medium, or None: the optics'.
+    """
 
     items: tuple = ()
     medium_index: float | None = None
@@ -397,10 +229,12 @@ class Composite(Phantom):
         Parameters
         ----------
         medium_index : float
+            Unused: the items' Δn is already relative to the medium.
 
         Returns
         -------
         list of Ellipsoid or Box
+            ``items``.
         """
         if not self.items:
             raise SsdpcError("Composite phantom is empty; give it Ellipsoid/Box items")
@@ -409,7 +243,19 @@ class Composite(Phantom):
 
 @dataclass(frozen=True)
 class Sphere(Phantom):
-    """Homogeneous sphere of (complex) index ``n``; default = the paper's 13 µm PMMA bead."""
+    """Homogeneous sphere of (complex) index ``n``; default = the paper's 13 µm PMMA bead.
+
+    Attributes
+    ----------
+    center_um : (float, float, float)
+        Centre (x, y, z), µm.
+    diameter_um : float
+        µm.
+    n : complex
+        Refractive index; imaginary part: absorption index κ.
+    medium_index : float or None
+        The medium, or None: the optics'.
+    """
 
     center_um: tuple[float, float, float] = (0.0, 0.0, 0.0)
     diameter_um: float = 13.0
@@ -426,10 +272,12 @@ class Sphere(Phantom):
         Parameters
         ----------
         medium_index : float
+            Index of the medium.
 
         Returns
         -------
-        list of Ellipsoid or Box
+        list of Ellipsoid
+            One ellipsoid with Δn = n - ``medium_index``.
         """
         r = self.diameter_um / 2
         return [Ellipsoid(tuple(map(float, self.center_um)), (r, r, r), complex(self.n) - medium_index)]
@@ -437,7 +285,14 @@ class Sphere(Phantom):
 
 @dataclass(frozen=True)
 class Spheres(Phantom):
-    """Several non-overlapping spheres in one medium (the spheres' own medium is ignored)."""
+    """Several non-overlapping spheres in one medium (the spheres' own medium is ignored).
+
+    Attributes
+    ----------
+    spheres : tuple of Sphere
+    medium_index : float or None
+        The medium, or None: the optics'.
+    """
 
     spheres: tuple = ()
     medium_index: float | None = None
@@ -453,10 +308,12 @@ class Spheres(Phantom):
         Parameters
         ----------
         medium_index : float
+            Index of the medium.
 
         Returns
         -------
-        list of Ellipsoid or Box
+        list of Ellipsoid
+            One per sphere.
         """
         return [p for s in self.spheres for p in s.parts(medium_index)]
 
@@ -466,7 +323,27 @@ class Cell(Phantom):
     """Ellipsoidal cell (index ``n``) with an ellipsoidal nucleus or inclusion (``n_nucleus``).
 
     The nucleus offset is given in the cell's own (rotated) frame; it must lie inside
-    the cell (the two Δn add up: cytoplasm n - n_medium, nucleus n_nucleus - n)."""
+    the cell (the two Δn add up: cytoplasm n - n_medium, nucleus n_nucleus - n).
+
+    Attributes
+    ----------
+    center_um : (float, float, float)
+        Centre of the cell (x, y, z), µm.
+    semi_axes_um : (float, float, float)
+        Semi-axes of the cell along x', y', z, µm.
+    n : complex
+        Index of the cytoplasm.
+    nucleus_offset_um : (float, float, float)
+        Nucleus centre relative to the cell centre, in the cell's rotated frame, µm.
+    nucleus_semi_axes_um : (float, float, float)
+        Semi-axes of the nucleus along x', y', z, µm.
+    n_nucleus : complex
+        Index of the nucleus.
+    angle_deg : float
+        Rotation of cell and nucleus about z, degrees.
+    medium_index : float or None
+        The medium (default water, 1.33), or None: the optics'.
+    """
 
     center_um: tuple[float, float, float] = (0.0, 0.0, 0.0)
     semi_axes_um: tuple[float, float, float] = (12.0, 8.0, 5.0)
@@ -483,10 +360,12 @@ class Cell(Phantom):
         Parameters
         ----------
         medium_index : float
+            Index of the medium.
 
         Returns
         -------
-        list of Ellipsoid or Box
+        list of Ellipsoid
+            [cell, nucleus]; the nucleus's Δn is n_nucleus - n.
         """
         t = math.radians(self.angle_deg)
         ox, oy, oz = self.nucleus_offset_um
@@ -511,7 +390,27 @@ class BarTarget(Phantom):
     horizontal bars (varying along y), line width = period / 2, bar length = 5 line
     widths; elements sit side by side along x, centred on ``center_um`` (x, y).
     The bars transmit ``transmittance`` of the intensity (Δn = i κ with
-    κ = -ln(T) λ / (4π t), for λ = ``wavelength_um``) and add ``phase_rad`` of phase."""
+    κ = -ln(T) λ / (4π t), for λ = ``wavelength_um``) and add ``phase_rad`` of phase.
+
+    Attributes
+    ----------
+    period_um : tuple of float
+        Bar period of each element, µm.
+    z_um : float
+        Depth of the target, µm.
+    thickness_um : float
+        Thickness t of the bars, µm.
+    transmittance : float
+        Intensity transmittance T of the bars, in (0, 1].
+    phase_rad : float
+        Phase the bars add, rad.
+    wavelength_um : float
+        Vacuum wavelength used to turn T and the phase into Δn, µm.
+    center_um : (float, float)
+        Centre of the target (x, y), µm.
+    medium_index : float or None
+        The medium, or None: the optics'.
+    """
 
     period_um: tuple = (8.76, 6.2, 4.92, 4.38)
     z_um: float = 40.0
@@ -535,10 +434,12 @@ class BarTarget(Phantom):
         Parameters
         ----------
         medium_index : float
+            Unused: the bars' Δn does not depend on the medium.
 
         Returns
         -------
-        list of Ellipsoid or Box
+        list of Box
+            Six per element, alternately a vertical and a horizontal bar.
         """
         t, lam = self.thickness_um, self.wavelength_um
         dn = self.phase_rad * lam / (2 * math.pi * t) + 1j * (-math.log(self.transmittance) * lam / (4 * math.pi * t))
@@ -574,12 +475,27 @@ def pmma_bead(center_um=(0.0, 0.0, 0.0)) -> Sphere:
 
 
 def two_beads() -> Spheres:
-    """Two 6 µm beads (n 1.56) in 1.518, at z = -25 µm and z = +30 µm, 40 µm apart in x."""
+    """Two 6 µm beads (n 1.56) in 1.518, at z = -25 µm and z = +30 µm, 40 µm apart in x.
+
+    Returns
+    -------
+    Spheres
+    """
     return Spheres((Sphere((-20.0, 0.0, -25.0), 6.0, 1.56), Sphere((20.0, 0.0, 30.0), 6.0, 1.56)), medium_index=1.518)
 
 
 def cell(**kw) -> Cell:
-    """A cell (n 1.37) with a nucleus (n 1.39) in water (1.33); keywords override ``Cell`` fields."""
+    """A cell (n 1.37) with a nucleus (n 1.39) in water (1.33); keywords override ``Cell`` fields.
+
+    Parameters
+    ----------
+    **kw
+        ``Cell`` fields.
+
+    Returns
+    -------
+    Cell
+    """
     return Cell(**kw)
 
 
@@ -612,6 +528,7 @@ def moving_sample(
     Parameters
     ----------
     n_frames : int
+        Number of frames (phantoms).
     start_um, end_um : (float, float, float)
         (x, y, z) of the path's ends, µm.
     turn_deg : float
@@ -649,6 +566,7 @@ def optics_for(phantom: Phantom | list | None, optics: Optics) -> Optics:
     Parameters
     ----------
     phantom : Phantom, list of Phantom (a time series: the first decides) or None
+        The sample.
     optics : Optics
 
     Returns

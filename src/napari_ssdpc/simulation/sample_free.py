@@ -35,11 +35,14 @@ def white_intensity(
     grid : Grid, optional
         Default the nominal grid.
     camera : Camera, optional
+        Its illumination fall-off is applied; default ``Camera()``.
     array : ArrayErrors, optional
+        Errors of the array; None: the ideal lattice.
 
     Returns
     -------
     ndarray, float64, (H, W)
+        Intensity unit.
     """
     grid, camera, lenslets, centres = array_as_built(optics, grid, camera, array)
     sampling = Sampling.for_optics(optics)
@@ -92,12 +95,16 @@ def white_frame(
     grid : Grid, optional
         Default the nominal grid.
     camera : Camera, optional
+        Default ``Camera()``.
     rng : numpy.random.Generator or int, optional
+        Generator or seed of the noise; None: ``camera.seed``.
     array : ArrayErrors, optional
+        Errors of the array; None: the ideal lattice.
 
     Returns
     -------
     ndarray, uint16, (H, W)
+        ADU.
     """
     camera = camera or Camera()
     return camera.apply(white_intensity(optics, grid, camera, array=array), camera.rng(rng))
@@ -124,14 +131,18 @@ def flat_intensity(
     grid : Grid, optional
         Default the nominal grid.
     camera : Camera, optional
+        Its illumination fall-off is applied; default ``Camera()``.
     source : Source, optional
+        Sampling of the condenser disk; default ``Source()``.
     progress : callable, optional
         ``progress(done, total)`` per source point.
     array : ArrayErrors, optional
+        Errors of the array; None: the ideal lattice.
 
     Returns
     -------
     ndarray, float64, (H, W)
+        Intensity unit.
     """
     grid, camera, lenslets, centres = array_as_built(optics, grid, camera, array)
     sampling = Sampling.for_optics(optics)
@@ -161,13 +172,18 @@ def flat_frame(
     grid : Grid, optional
         Default the nominal grid.
     camera : Camera, optional
+        Default ``Camera()``.
     rng : numpy.random.Generator or int, optional
+        Generator or seed of the noise; None: ``camera.seed``.
     source : Source, optional
+        Sampling of the condenser disk; default ``Source()``.
     array : ArrayErrors, optional
+        Errors of the array; None: the ideal lattice.
 
     Returns
     -------
     ndarray, uint16, (H, W)
+        ADU.
     """
     camera = camera or Camera()
     return camera.apply(flat_intensity(optics, grid, camera, source, array=array), camera.rng(rng))

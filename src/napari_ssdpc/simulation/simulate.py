@@ -78,7 +78,33 @@ __all__ = [
 
 @dataclass
 class Simulation:
-    """Result of ``simulate``: raw frame, noise-free intensity and what made them."""
+    """Result of ``simulate``: raw frame, noise-free intensity and what made them.
+
+    Attributes
+    ----------
+    frame : ndarray, uint16, (H, W)
+        Raw frame, ADU.
+    intensity : ndarray, float64, (H, W)
+        Noise-free sensor image, intensity unit.
+    grid : Grid
+        The array on the sensor.
+    lenslets : list of Lenslet
+        The lenslets as built.
+    phantom : Phantom or None
+        The sample, bound to its medium (None: no sample).
+    optics : Optics
+        The optics used (with the phantom's medium, if it has one).
+    source : Source
+    sampling : Sampling
+    camera : Camera
+    seconds : float
+        Wall time of the simulation, s.
+    n_source_points : int
+        Plane waves summed.
+    info : dict
+        ``subgrid`` (multislice sub-grid side, samples; 0 without sample), ``screens`` (non-empty
+        slabs), ``grid_n`` (object grid side, samples), ``crop`` (lenslet crop width, lattice units).
+    """
 
     frame: np.ndarray
     intensity: np.ndarray
@@ -120,9 +146,11 @@ def simulate(
     grid : Grid, optional
         Default the nominal grid.
     camera : Camera, optional
+        Default ``Camera()``.
     source : Source, optional
-        Sampling of the condenser disk.
+        Sampling of the condenser disk; default ``Source()``.
     rng : numpy.random.Generator or int, optional
+        Generator or seed of the noise; None: ``camera.seed``.
     progress : callable, optional
         ``progress(done, total)`` per source point.
     dz_um : float
@@ -194,6 +222,7 @@ def effective_tan_theta(optics: Optics, lenslet, supersample: int = 400) -> np.n
     Returns
     -------
     ndarray, (2,)
+        tanθ·û (x, y), dimensionless: µm of lateral shift per µm of depth.
     """
     rho, cut = optics.subaperture_radius, optics.cutoff
     t = np.linspace(-rho, rho, supersample)

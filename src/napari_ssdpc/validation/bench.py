@@ -81,7 +81,13 @@ def _load():
 
 
 def peak_rss_mb() -> float:
-    """Peak resident memory of this process so far (MB)."""
+    """Peak resident memory of this process so far (MB).
+
+    Returns
+    -------
+    float
+        MB (2**20 bytes).
+    """
     r = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return r / 1024 if sys.platform != "darwin" else r / 2**20
 
@@ -102,11 +108,13 @@ def simulated_case(name, condenser_na, cache_dir, frames=None):
     Parameters
     ----------
     name : str
-        'bead' (the standard case) or 'series'.
+        Name of the case; the cache file is ``{name}_na{condenser_na}_s0.npz``.
     condenser_na : float
+        Condenser NA of the paper's optics.
     cache_dir : Path
+        Folder of the cached frames.
     frames : int, optional
-        Frames of a series.
+        Frames of a moving-sample series; None: the PMMA bead, one frame.
 
     Returns
     -------
@@ -160,14 +168,16 @@ def fast_path(case, cal, cfg, device="cpu", stacks=True, repeats=2):
     stacks : bool
         Build the Richardson-Lucy operators too.
     repeats : int
-        Frames timed (the best counts).
+        Frames reconstructed; the first and the last are reported.
 
     Returns
     -------
     rec : Reconstructor
     result : Result
+        The last frame's.
     info : dict
-        Build and frame times (s), memory (MB).
+        Build, first-frame and frame times and the stage timings (s), lit lenslets, planes,
+        peak RSS (MB).
     """
     from napari_ssdpc.reconstruction.pipeline import Reconstructor
 
@@ -199,13 +209,15 @@ def series_stage(case, cal, cfg, device, n_frames, rec=None) -> dict:
         Reconstructor keywords.
     device : {'cpu', 'gpu'}
     n_frames : int
+        Length of the series when ``case`` has a single frame (repeated).
     rec : Reconstructor, optional
         Reused when given.
 
     Returns
     -------
     dict
-        Frames per second and per-frame timings.
+        Frames, build time (s), frames per second (all and steady), mean read, reconstruct and
+        write times per frame (s), peak RSS (MB).
     """
     import tifffile
 
@@ -240,16 +252,22 @@ def reference_stage(rec, res_fast, frame, canvas, fast_full=None) -> dict:
     Parameters
     ----------
     rec : Reconstructor
+        Built with the Richardson-Lucy operators.
     res_fast : Result
         The fast path's result of ``frame``.
     frame : ndarray, (H, W)
-    canvas : {'sensor', 'compact'}
-        The reference path's canvas.
-    fast_full : Result, optional
+        Raw frame.
+    canvas : {'sensor', 'eis'}
+        The reference path's canvas (see :func:`~napari_ssdpc.validation.reference.layout`).
+    fast_full : dict, optional
+        The fast path's stage info (from :func:`fast_path`) on the full z grid: the reference's
+        frame time is extrapolated to its number of planes.
 
     Returns
     -------
     dict
+        Canvas shape (px), build and frame times (s), speed-up, largest relative differences of
+        the stacks and of Δn, peak RSS (MB).
     """
     from napari_ssdpc.validation.reference import max_relative_difference, reconstruct_reference
 
@@ -305,10 +323,12 @@ def run_bench(
     log : callable, optional
         ``log(text)`` for progress lines.
     case, series_case, high_na_case : Case, optional
+        Inputs instead of the simulated ones; ``high_na_case=False`` skips NA 0.3.
 
     Returns
     -------
     dict
+        ``machine``, ``device``, ``quick``, ``case``, ``rss_before_mb``, ``stages`` and ``targets``.
     """
     from napari_ssdpc.calibration.calibrate import calibrate
     from napari_ssdpc.reconstruction.backend import get_backend

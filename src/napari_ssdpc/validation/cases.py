@@ -31,7 +31,25 @@ VALIDATION_NA = 0.3
 
 @dataclass
 class Case:
-    """A simulated acquisition: raw, flat and white frames plus the truth."""
+    """A simulated acquisition: raw, flat and white frames plus the truth.
+
+    Attributes
+    ----------
+    name : str
+    optics : Optics
+        The optics simulated (with the phantom's medium).
+    phantom : Phantom or list of Phantom
+        The truth (a list: one per frame of a series).
+    frame : ndarray, uint16, (H, W) or (T, H, W)
+        Raw frame(s), ADU.
+    flat, white : ndarray, uint16, (H, W)
+        Flat frame (sample's condenser NA, no sample) and white frame (condenser fully open), ADU.
+    grid : Grid
+        The array as simulated (the truth for calibration).
+    seconds : float
+        Simulation time per frame, s.
+    extra : dict
+    """
 
     name: str
     optics: Optics
@@ -52,10 +70,14 @@ def simulate_case(
     Parameters
     ----------
     name : str
-    phantom : Phantom
+        Name of the case, also of its cache file.
+    phantom : Phantom or list of Phantom
+        The sample; a list simulates a series, one frame per phantom.
     optics : Optics
     cache_dir : Path, optional
+        Folder of the .npz cache.
     seed : int
+        Seed of the camera noise.
     axis_offset_px : (float, float)
         Misalignment of the array, px.
     rotation_deg : float
@@ -104,13 +126,14 @@ def reconstruct_case(case: Case, *, z=(-80.0, 80.0), dz=1.0, **kw):
     z : (float, float)
         z range, µm.
     dz : float
-        µm.
+        Plane spacing, µm.
     **kw
         More Reconstructor keywords.
 
     Returns
     -------
     result : Result
+        Of the (first) frame.
     calibration : Calibration
     rec : Reconstructor
     """
@@ -128,12 +151,15 @@ def truth_volume(phantom, result, medium_index, blur_um=None):
     ----------
     phantom : Phantom
     result : Result
+        Its z, y, x coordinates (µm) give the grid.
     medium_index : float
     blur_um : (float, float), optional
+        (FWHM_z, FWHM_xy), µm.
 
     Returns
     -------
     ndarray, float32, (Z, Y, X)
+        Real part of Δn (unitless).
     """
     vol = np.real(phantom.volume(result.z_um, result.y_um, result.x_um, medium_index=medium_index))
     if blur_um is not None:
@@ -159,11 +185,15 @@ def bead_metrics(result, sphere, medium_index) -> dict:
     ----------
     result : Result
     sphere : Sphere
+        The truth.
     medium_index : float
 
     Returns
     -------
     dict
+        ``dn_true``, ``dn_centre``, ``ri_centre``, ``dn_peak``, ``centroid_um`` (x, y, z),
+        ``peak_z_um``, ``fwhm_x_um``, ``fwhm_y_um``, ``fwhm_z_um`` (µm), ``opd_ratio``
+        (reconstructed / true Δn·d along z through the centre) and ``profiles`` (x, y, z).
     """
     x, y, z = sphere.center_um
     sign = 1 if np.real(sphere.n) > medium_index else -1
@@ -212,11 +242,13 @@ def bar_metrics(result, target) -> dict:
     Parameters
     ----------
     result : Result
+        With ``absorption``.
     target : BarTarget
 
     Returns
     -------
     dict
+        ``contrast`` (period µm -> contrast), ``best_focus_z_um`` and ``focus_energy`` (Z,).
     """
     mu = result.absorption
     iz = int(np.argmin(abs(result.z_um - target.z_um)))
@@ -247,12 +279,15 @@ def cell_metrics(result, cell, resolution_um) -> dict:
     ----------
     result : Result
     cell : Cell
+        The truth.
     resolution_um : (float, float)
         (FWHM_z, FWHM_xy), µm.
 
     Returns
     -------
     dict
+        ``correlation_blurred``, ``correlation_truth`` (within 50 µm of the axis),
+        ``ri_nucleus``, ``ri_nucleus_true``, ``ri_nucleus_blurred_truth``.
     """
     n_med = float(cell.medium_index)
     truth = truth_volume(cell, result, n_med)
@@ -277,6 +312,7 @@ def paper_optics(condenser_na=VALIDATION_NA) -> Optics:
     Parameters
     ----------
     condenser_na : float
+        Condenser NA.
 
     Returns
     -------

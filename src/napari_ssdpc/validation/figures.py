@@ -24,14 +24,17 @@ def bead_figure(result, sphere, medium_index, path, title=""):
     ----------
     result : Result
     sphere : Sphere
+        The truth.
     medium_index : float
     path : str or Path
         The PNG.
     title : str
+        Figure title; empty: none.
 
     Returns
     -------
-    Path
+    str or Path
+        ``path``.
     """
     from napari_ssdpc.validation.cases import truth_volume
 

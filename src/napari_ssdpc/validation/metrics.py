@@ -48,12 +48,16 @@ def peak_region(volume, sign: int = 0, level: float = 0.5, seed=None):
     ----------
     volume : ndarray
     sign : {-1, 0, 1}
+        Sign of the peak; 0: that of the larger |extremum|.
     level : float
+        Fraction of the peak value that bounds the region.
     seed : tuple of int, optional
+        Index of the peak; default the extremum.
 
     Returns
     -------
     ndarray, bool
+        Shaped like ``volume``.
     """
     v = np.asarray(volume, float)
     if sign == 0:
@@ -71,13 +75,14 @@ def centroid(volume, coords, sign: int = 0, level: float = 0.5, seed=None) -> np
     ----------
     volume : ndarray
     coords : sequence of ndarray, 1D
-    sign : {-1, 0, 1}
-    level : float
-    seed : tuple of int, optional
+        Coordinates of each axis of ``volume``.
+    sign, level, seed
+        As in :func:`peak_region`.
 
     Returns
     -------
     ndarray, (ndim,)
+        In the axis order of ``volume``.
     """
     v = np.asarray(volume, float)
     mask = peak_region(v, sign, level, seed)
@@ -93,13 +98,18 @@ def line_through(volume, coords, point, axis: int):
     ----------
     volume : ndarray
     coords : sequence of ndarray, 1D
+        Coordinates of each axis, µm.
     point : sequence of float
+        Position per axis, µm.
     axis : int
+        Axis of the profile.
 
     Returns
     -------
     x : ndarray
+        ``coords[axis]``.
     values : ndarray
+        The profile.
     """
     idx = [int(np.argmin(np.abs(np.asarray(c) - p))) for c, p in zip(coords, point)]
     sl = tuple(slice(None) if a == axis else i for a, i in enumerate(idx))
@@ -112,7 +122,9 @@ def correlation(a, b, mask=None) -> float:
     Parameters
     ----------
     a, b : ndarray
+        Same shape.
     mask : ndarray, bool, optional
+        Elements compared; default all.
 
     Returns
     -------

@@ -43,6 +43,19 @@ class Layout:
     at position i (i < split) or i − P (i ≥ split), and placed on the canvas at rows [0, P)
     (position p at canvas row p + offset). Lenslet k's kernel sits at ``origins[k]``, so its
     view pixel j lies on canvas row ``origins[k] + offset + j``.
+
+    Attributes
+    ----------
+    shape : tuple of int
+        The canvas (rows, cols), px.
+    fft_shape : tuple of int
+        (P, Q): the fast path's padded view grid, px.
+    view_shape : tuple of int
+        (ny, nx) of a view, px.
+    reach : tuple of int
+        Kernel half-width kept (R_y, R_x) = ((P − ny)//2, (Q − nx)//2), px.
+    origins : ndarray, int, (K, 2)
+        Kernel centre (row, col) of each lenslet on the canvas, px.
     """
 
     shape: tuple  # canvas (rows, cols)
@@ -114,8 +127,9 @@ def layout(rec, canvas: str = "sensor") -> Layout:
     Parameters
     ----------
     rec : Reconstructor
-    canvas : {'sensor', 'compact'}
-        The whole sensor, or the views packed edge to edge.
+    canvas : {'sensor', 'eis'}
+        'sensor': the camera's frame size (larger only when the spread EIs do not fit);
+        'eis': the box that holds the spread EIs, at a fast FFT size.
 
     Returns
     -------
@@ -176,7 +190,19 @@ def full_frame_psf(kernels, members, lay: Layout) -> np.ndarray:
 
 
 class ReferenceRL:
-    """One half's Richardson–Lucy with full-frame PSFs and whole-sensor FFT convolutions."""
+    """One half's Richardson–Lucy with full-frame PSFs and whole-sensor FFT convolutions.
+
+    Parameters
+    ----------
+    rec : Reconstructor
+        Built with the Richardson-Lucy operators.
+    half : {'up', 'down', 'left', 'right'}
+    lay : Layout
+    kernels : sequence of ndarray, optional
+        Per plane, the lenslets' kernels (K, 2R_y+1, 2R_x+1); default the fast path's.
+    progress : callable, optional
+        ``progress(done, total)`` per plane of the PSF build.
+    """
 
     def __init__(self, rec, half: str, lay: Layout, kernels=None, progress=None):
         self.lay = lay
@@ -203,6 +229,7 @@ class ReferenceRL:
         Parameters
         ----------
         views : ndarray, (K_h, ny, nx)
+            One view per lenslet of the half.
 
         Returns
         -------
@@ -232,10 +259,11 @@ class ReferenceRL:
         Parameters
         ----------
         obj : ndarray, (Z, P, Q)
+            Object planes on the linear grid.
 
         Returns
         -------
-        ndarray, canvas shape
+        ndarray, float, canvas shape
         """
         acc = np.zeros_like(self.otf[0])
         for i in range(self.z):
@@ -253,7 +281,8 @@ class ReferenceRL:
 
         Returns
         -------
-        ndarray, (Z, P, Q)
+        ndarray, float32, (Z, P, Q)
+            Linear grid.
         """
         spec = sfft.rfft2(img, workers=-1)
         p, q = self.lay.fft_shape
@@ -270,11 +299,13 @@ class ReferenceRL:
         Parameters
         ----------
         views : ndarray, (K_h, ny, nx)
+            Preprocessed views of the half's lenslets.
         iterations : int
 
         Returns
         -------
         RLResult
+            The stack (Z, ny, nx) and the relative change per iteration.
         """
         y = self.place(np.asarray(views, np.float32)) * self.mask
         mean = float(np.sum(y) / max(np.sum(self.mask), 1))
@@ -294,7 +325,20 @@ class ReferenceRL:
 @dataclass
 class ReferenceResult:
     """The reference path's reconstruction: stacks per half, Δn and phase (Z, ny, nx), the
-    layout used and timings (s)."""
+    layout used and timings (s).
+
+    Attributes
+    ----------
+    stacks : dict
+        Half name -> RL stack, ndarray float32 (Z, ny, nx).
+    delta_n : ndarray, (Z, ny, nx)
+        Δn (unitless).
+    phase : ndarray, (Z, ny, nx)
+        Phase per slab, rad.
+    layout : Layout
+    timings : dict
+        ``build_s``, ``preprocess_s``, ``rl_s``, ``dpc_s``, ``phase_s``, s.
+    """
 
     stacks: dict
     delta_n: np.ndarray
@@ -315,8 +359,11 @@ def reconstruct_reference(rec, frame, canvas: str = "sensor", progress=None) -> 
     rec : Reconstructor
         Built with Richardson-Lucy operators.
     frame : ndarray, (H, W)
-    canvas : {'sensor', 'compact'}
+        Raw frame.
+    canvas : {'sensor', 'eis'}
+        See :func:`layout`.
     progress : callable, optional
+        ``progress(done, total, label)`` per plane of the PSF builds.
 
     Returns
     -------
@@ -359,6 +406,7 @@ def max_relative_difference(a, b) -> float:
     Parameters
     ----------
     a, b : array_like
+        Same shape; ``b`` is the reference.
 
     Returns
     -------

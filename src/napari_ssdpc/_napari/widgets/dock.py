@@ -1,5 +1,5 @@
 """The ssDPC dock: the whole workflow in one dock, as tabs (optics, calibrate, method, reconstruct,
-profile, movie), with the settings file the command line reads.
+slices, profile, movie), with the settings file the command line reads.
 
 Each tab holds one of the widgets that can also be opened on its own; all of them share the
 viewer's :class:`~napari_ssdpc._napari.widgets.session.Session`, so the dock and any separate
@@ -22,6 +22,7 @@ from napari_ssdpc._napari.widgets.operators import OperatorsWidget
 from napari_ssdpc._napari.widgets.optics import OpticsWidget
 from napari_ssdpc._napari.widgets.reconstruct import ReconstructWidget
 from napari_ssdpc._napari.widgets.session import remembered_settings_path, session_for
+from napari_ssdpc._napari.widgets.slices import SlicesWidget
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.settings.config import RunConfig
 
@@ -44,6 +45,7 @@ TABS = (
     ("Calibrate", CalibrateWidget),
     ("Method", OperatorsWidget),
     ("Reconstruct", ReconstructWidget),
+    ("Slices", SlicesWidget),
     ("Profile", ProfileWidget),
     ("Movie", MovieWidget),
 )

@@ -1,0 +1,127 @@
+"""The Slices widget: xz and yz sections of a reconstruction beside napari's xy view.
+
+The axial resolution of a light-field phase volume is several times coarser than the lateral one,
+so a volume is judged on its sections along z. The two sections pass through the viewer's current
+point (the z slider and the last clicked position) and follow it; their axes are in µm, drawn to
+scale, with the layer's colormap and contrast limits.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from magicgui.widgets import ComboBox, Container, Label
+from qtpy.QtWidgets import QVBoxLayout, QWidget
+
+from napari_ssdpc._napari.widgets.common import MIN_DOCK_HEIGHT_PX, follow_layers, wrap
+
+__all__ = ["SlicesWidget", "sections"]
+
+
+def sections(layer, point) -> dict:
+    """The xz and yz sections of a (z, y, x) or (t, z, y, x) image layer through a world point.
+
+    Parameters
+    ----------
+    layer : napari Image layer
+        A result volume, scale in µm.
+    point : sequence of float
+        World coordinates of the point, µm (and t for a series).
+
+    Returns
+    -------
+    dict
+        ``xz`` (Z, X) and ``yz`` (Z, Y) arrays, the ``extent_xz`` / ``extent_yz`` of each in µm
+        (left, right, bottom, top) for matplotlib, and ``at`` = the (z, y, x) voxel they pass through.
+    """
+    data = layer.data
+    idx = np.round(np.asarray(layer.world_to_data(np.asarray(point)[-layer.ndim :]), float)).astype(int)
+    idx = np.clip(idx, 0, np.asarray(data.shape) - 1)
+    vol = np.asarray(data[tuple(idx[:-3])]) if layer.ndim > 3 else np.asarray(data)
+    z, y, x = idx[-3:]
+    (dz, dy, dx), (z0, y0, x0) = layer.scale[-3:], layer.translate[-3:]
+    nz, ny, nx = vol.shape
+    zlim = (z0 + (nz - 0.5) * dz, z0 - 0.5 * dz)  # z grows downward, as in the xz/yz views of napari
+    return {
+        "xz": vol[:, y, :],
+        "yz": vol[:, :, x],
+        "extent_xz": (x0 - 0.5 * dx, x0 + (nx - 0.5) * dx, *zlim),
+        "extent_yz": (y0 - 0.5 * dy, y0 + (ny - 0.5) * dy, *zlim),
+        "at": (int(z), int(y), int(x)),
+    }
+
+
+class SlicesWidget(QWidget):
+    """xz and yz sections of a reconstruction through the current point, updated as it moves.
+
+    Parameters
+    ----------
+    napari_viewer : napari.Viewer
+    """
+
+    def __init__(self, napari_viewer):
+        super().__init__()
+        from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
+        from matplotlib.figure import Figure
+
+        self.viewer = napari_viewer
+        self.layer = ComboBox(label="volume", choices=self._results, tooltip="the reconstruction to section")
+        self.info = wrap(Label(value=""))
+        self.controls = Container(widgets=[self.layer, self.info])
+        self.figure = Figure(figsize=(4, 5), tight_layout=True)
+        self.canvas = FigureCanvasQTAgg(self.figure)
+        self.canvas.setMinimumHeight(2 * MIN_DOCK_HEIGHT_PX)
+        layout = QVBoxLayout(self)
+        layout.addWidget(self.controls.native)
+        layout.addWidget(self.canvas)
+        follow_layers(napari_viewer, self.controls)
+        self.layer.changed.connect(lambda *_: self.update())
+        napari_viewer.dims.events.current_step.connect(lambda *_: self.update())
+        napari_viewer.mouse_drag_callbacks.append(self._clicked)
+
+    def _results(self, _widget=None):
+        layers = [
+            lyr
+            for lyr in reversed(self.viewer.layers)
+            if lyr.metadata.get("ssdpc", {}).get("kind") == "result" and lyr.ndim >= 3
+        ]
+        layers.sort(key=lambda lyr: lyr.metadata["ssdpc"].get("quantity") != "ri")  # RI first
+        return [(lyr.name, lyr) for lyr in layers]
+
+    def _clicked(self, viewer, event):
+        """A click in the canvas moves the sections to that position."""
+        self._point = tuple(event.position)
+        self.update()
+
+    def update(self) -> None:
+        """Draw the sections of the chosen volume through the current point."""
+        layer = self.layer.value
+        self.figure.clear()
+        if layer is None:
+            self.info.value = "reconstruct a frame: its xz and yz sections appear here"
+            self.canvas.draw_idle()
+            return
+        point = np.array(self.viewer.dims.point, float)
+        clicked = getattr(self, "_point", None)
+        if clicked is not None and len(clicked) == len(point):
+            point[-2:] = np.asarray(clicked)[-2:]  # y, x of the last click; z from the slider
+        s = sections(layer, point)
+        lo, hi = layer.contrast_limits
+        cmap = layer.colormap.name
+        for k, (key, label) in enumerate((("xz", "x (µm)"), ("yz", "y (µm)"))):
+            ax = self.figure.add_subplot(2, 1, k + 1)
+            ax.imshow(s[key], extent=s[f"extent_{key}"], cmap=_mpl_cmap(cmap), vmin=lo, vmax=hi, aspect="equal")
+            ax.set_xlabel(label)
+            ax.set_ylabel("z (µm)")
+            ax.set_title(f"{key} section", fontsize=9)
+        z, y, x = s["at"]
+        dz, dy, dx = layer.scale[-3:]
+        z0, y0, x0 = layer.translate[-3:]
+        self.info.value = f"through z {z0 + z * dz:.1f} µm, y {y0 + y * dy:.1f} µm, x {x0 + x * dx:.1f} µm"
+        self.canvas.draw_idle()
+
+
+def _mpl_cmap(name: str) -> str:
+    """matplotlib's name for a napari colormap (napari's 'gray' and most others are the same)."""
+    import matplotlib
+
+    return name if name in matplotlib.colormaps else "gray"
