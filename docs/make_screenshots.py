@@ -81,15 +81,21 @@ def main():
     times = {}
 
     # the dock, then the sample data and its optics
+    app.processEvents()
+    stalls.label, t0 = "opening the dock", time.perf_counter()
     _, dock = viewer.window.add_plugin_dock_widget("napari-ssdpc", "ssDPC")
+    app.processEvents()
+    times["dock open"] = time.perf_counter() - t0
     tabs = dock.tabs
     t0 = time.perf_counter()
     stalls.label = "opening the sample"
     viewer.open_sample("napari-ssdpc", "pmma_bead")
     app.processEvents()
     times["sample open"] = time.perf_counter() - t0
+    stalls.label = "adopting the sample's optics"
     viewer.layers.selection.active = viewer.layers["PMMA bead"]
     tabs["Optics"]._from_layer()
+    app.processEvents()
 
     # calibrate on the white frame
     cal_w = tabs["Calibrate"]

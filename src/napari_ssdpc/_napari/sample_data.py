@@ -103,23 +103,23 @@ def bead_frames():
     would be a needle over 100 µm long.
     """
     from napari_ssdpc.settings.optics import Optics
-    from napari_ssdpc.simulation import simulate as sim
 
     optics = Optics.paper().replace(  # NA 0.3: the condenser-NA sweep of docs/validation.md
         condenser_na=0.3, width_px=BEAD_ROI_PX, height_px=BEAD_ROI_PX, name="paper optics, 1024 px region"
     )
     base = (_physics(optics), __version__)
-    frame = _cached(
-        "pmma_bead",
-        lambda: sim.simulate(sim.pmma_bead(), optics, rng=np.random.default_rng(0)).frame,
-        _key("bead", *base, 0),
-    )
-    flat = _cached(
-        "pmma_bead_flat", lambda: sim.flat_frame(optics, rng=np.random.default_rng(1)), _key("flat", *base, 1)
-    )
-    white = _cached(
-        "pmma_bead_white", lambda: sim.white_frame(optics, rng=np.random.default_rng(2)), _key("white", *base, 2)
-    )
+
+    def simulated(kind: str, seed: int):  # only when the shipped frames are stale: the simulator loads then
+        from napari_ssdpc.simulation import simulate as sim
+
+        rng = np.random.default_rng(seed)
+        if kind == "bead":
+            return sim.simulate(sim.pmma_bead(), optics, rng=rng).frame
+        return (sim.flat_frame if kind == "flat" else sim.white_frame)(optics, rng=rng)
+
+    frame = _cached("pmma_bead", lambda: simulated("bead", 0), _key("bead", *base, 0))
+    flat = _cached("pmma_bead_flat", lambda: simulated("flat", 1), _key("flat", *base, 1))
+    white = _cached("pmma_bead_white", lambda: simulated("white", 2), _key("white", *base, 2))
     return frame, flat, white, optics
 
 

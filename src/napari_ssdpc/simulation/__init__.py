@@ -6,23 +6,27 @@ module ``simulate`` keeps its name here, so ``from napari_ssdpc.simulation impor
 gives the module).
 """
 
-from napari_ssdpc.simulation.camera import Camera
-from napari_ssdpc.simulation.imperfect import ArrayErrors
-from napari_ssdpc.simulation.multislice import Source
-from napari_ssdpc.simulation.phantoms import bar_target, cell, moving_sample, pmma_bead, two_beads
-from napari_ssdpc.simulation.sample_free import flat_frame, white_frame
-from napari_ssdpc.simulation.simulate import Simulation
+#: Public name -> the module that defines it (imported on first use).
+_EXPORTS = {
+    "ArrayErrors": "napari_ssdpc.simulation.imperfect",
+    "Camera": "napari_ssdpc.simulation.camera",
+    "Simulation": "napari_ssdpc.simulation.simulate",
+    "Source": "napari_ssdpc.simulation.multislice",
+    "bar_target": "napari_ssdpc.simulation.phantoms",
+    "cell": "napari_ssdpc.simulation.phantoms",
+    "flat_frame": "napari_ssdpc.simulation.sample_free",
+    "moving_sample": "napari_ssdpc.simulation.phantoms",
+    "pmma_bead": "napari_ssdpc.simulation.phantoms",
+    "two_beads": "napari_ssdpc.simulation.phantoms",
+    "white_frame": "napari_ssdpc.simulation.sample_free",
+}
+__all__ = sorted(_EXPORTS)
 
-__all__ = [
-    "ArrayErrors",
-    "Camera",
-    "Simulation",
-    "Source",
-    "bar_target",
-    "cell",
-    "flat_frame",
-    "moving_sample",
-    "pmma_bead",
-    "two_beads",
-    "white_frame",
-]
+
+def __getattr__(name: str):
+    """Load a public name's module on first use (the package imports nothing heavy up front)."""
+    if name in _EXPORTS:
+        from importlib import import_module
+
+        return getattr(import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
