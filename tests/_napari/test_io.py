@@ -207,7 +207,7 @@ def test_time_series_sample_is_lazy_20_frames(tmp_path, monkeypatch):
 
     calls = []
     monkeypatch.setattr(_sample_data, "series_frame", lambda i, n: calls.append(i) or np.zeros((2048, 2448), np.uint16))
-    layers = _sample_data.moving_sample_series()
+    layers = _sample_data.moving_sample_series(prefetch=False)
     series = layers[-1][0]
     assert isinstance(series, da.Array) and series.shape == (20, 2048, 2448) and series.dtype == np.uint16
     assert calls == []  # nothing simulated until a frame is read
@@ -216,6 +216,49 @@ def test_time_series_sample_is_lazy_20_frames(tmp_path, monkeypatch):
     assert layers[-1][1]["axis_labels"] == ("t", "y", "x")
     assert layers[-1][1]["metadata"]["ssdpc"]["optics"]["medium_index"] == 1.33
 
+
+
+def test_time_series_sample_is_made_in_the_background_once_each(monkeypatch):
+    """Opening the series starts a thread that makes every frame once, onward from the frame read."""
+    import threading
+    import time
+
+    made, guard = [], threading.Lock()
+
+    def fake(i, n):
+        time.sleep(0.01)
+        with guard:
+            made.append(i)
+        return np.zeros((4, 4), np.uint16)
+
+    monkeypatch.setattr(_sample_data, "series_frame", fake)
+    ahead = _sample_data.SeriesPrefetch(6)
+    ahead.asked(3)  # the user looks at frame 3 at once
+    ahead.thread.join(10)
+    assert not ahead.thread.is_alive()
+    assert sorted(made) == list(range(6)) and ahead.made == set(range(6))
+
+
+def test_a_cached_frame_is_made_once_when_two_threads_ask(tmp_path, monkeypatch):
+    import threading
+    import time
+
+    monkeypatch.setenv("NAPARI_SSDPC_CACHE", str(tmp_path))
+    calls = []
+
+    def make():
+        calls.append(1)
+        time.sleep(0.2)
+        return np.full((3, 5), 7, np.uint16)
+
+    out = []
+    threads = [threading.Thread(target=lambda: out.append(_sample_data._cached("f", make, "k"))) for _ in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(calls) == 1 and len(out) == 3
+    assert all(np.array_equal(o, np.full((3, 5), 7)) for o in out)
 
 # ------------------------------------------------- outputs of `ssdpc reconstruct`
 def test_reads_the_cli_reconstruction_outputs(tmp_path):
@@ -273,3 +316,16 @@ def test_reads_the_cli_reconstruction_outputs(tmp_path):
     [(data, skw, _)] = _layers(tmp_path / "s.zarr", _reader.get_result_reader)
     assert data.shape == (2, 11, 145, 145) and skw["axis_labels"] == ("t", "z", "y", "x")
     assert np.array_equal(np.asarray(data[1]), np.asarray(ri))
+
+
+def test_cache_drops_unfinished_files_left_by_an_exit(tmp_path, monkeypatch):
+    import os
+
+    monkeypatch.setenv("NAPARI_SSDPC_CACHE", str(tmp_path))
+    folder = _sample_data.cache_dir()
+    old, fresh = folder / ".moving_20_004-x.tif.1.a.part", folder / ".moving_20_005-x.tif.1.b.part"
+    old.write_bytes(b"half")
+    fresh.write_bytes(b"being written")
+    os.utime(old, (1e9, 1e9))
+    _sample_data.cache_dir()
+    assert not old.exists() and fresh.exists()

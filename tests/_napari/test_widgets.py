@@ -124,7 +124,7 @@ def test_end_to_end_bead(make_napari_viewer, qtbot, bead, errors):
 def test_time_series_gives_tzyx_layer(make_napari_viewer, qtbot, errors):
     optics = _sample_data.series_optics()
     flat, white = _sample_data.series_flat_white()
-    series = _sample_data.series_array()[:3]  # first 3 frames of the sample series (lazy)
+    series = _sample_data.series_array(prefetch=False)[:3]  # first 3 frames of the sample series (lazy)
     viewer = make_napari_viewer()
     viewer.add_image(white, name="white")
     viewer.add_image(flat, name="flat")

@@ -9,8 +9,9 @@
   20 frames. Reduced cost: the condenser disk is sampled every 4 lattice units
   (``Source(step=4)``, 221 source points instead of 821; about 4 s per frame instead of 18 s,
   and at most 3 % of the peak intensity different from the full sampling). The series is a lazy
-  dask array: each frame is simulated the first time it is read (on the time slider or by the
-  Reconstruct widget) and then cached.
+  dask array whose frames a background thread simulates and caches as soon as the sample opens,
+  onward from the last frame read; a frame read before the thread reaches it (on the time slider or
+  by the Reconstruct widget) waits for it, never for a second simulation of it.
 
 The cache lives in ``$NAPARI_SSDPC_CACHE`` (default ``~/.cache/napari-ssdpc``) under the package
 version; file names carry a hash of everything that made the frame, so a changed setting never
@@ -19,9 +20,12 @@ reads a stale file.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +38,7 @@ SHIPPED = Path(__file__).parent / "data"
 #: The bead sample's camera region of interest (px): the whole objective pupil (radius 435 px) fits.
 BEAD_ROI_PX = 1024
 SERIES_FRAMES = 20
+STALE_PART_S = 600.0  # an unfinished cache file older than this was left by an exit
 SERIES_SOURCE_STEP = 4  # reduced-cost source sampling of the time series (see module doc)
 
 
@@ -47,12 +52,26 @@ def cache_dir() -> Path:
     root = os.environ.get("NAPARI_SSDPC_CACHE") or Path.home() / ".cache" / "napari-ssdpc"
     path = Path(root) / __version__
     path.mkdir(parents=True, exist_ok=True)
+    for part in path.glob(".*.part"):  # a write that napari's exit cut short (background thread)
+        with contextlib.suppress(OSError):
+            if time.time() - part.stat().st_mtime > STALE_PART_S:
+                part.unlink()
     return path
 
 
 def _key(*parts) -> str:
     text = json.dumps(parts, sort_keys=True, default=repr)
     return hashlib.sha1(text.encode()).hexdigest()[:10]
+
+
+_LOCKS: dict[Path, threading.Lock] = {}
+_LOCKS_GUARD = threading.Lock()
+
+
+def _file_lock(path: Path) -> threading.Lock:
+    """One lock per cache file: two threads asking for one frame simulate it once."""
+    with _LOCKS_GUARD:
+        return _LOCKS.setdefault(path, threading.Lock())
 
 
 def _cached(name: str, make, key: str = "") -> np.ndarray:
@@ -62,11 +81,12 @@ def _cached(name: str, make, key: str = "") -> np.ndarray:
     from napari_ssdpc.io.frames import write_tiff
 
     path = cache_dir() / (f"{name}-{key}.tif" if key else f"{name}.tif")
-    for known in (SHIPPED / path.name, path):  # shipped with the package, else made here before
-        if known.is_file():
-            return tifffile.imread(known)
-    data = make()
-    write_tiff(path, data, photometric="minisblack")
+    with _file_lock(path):
+        for known in (SHIPPED / path.name, path):  # shipped with the package, else made here before
+            if known.is_file():
+                return tifffile.imread(known)
+        data = make()
+        write_tiff(path, data, photometric="minisblack")
     return data
 
 
@@ -221,12 +241,53 @@ def series_flat_white():
     return flat, white
 
 
-def series_array(n_frames: int = SERIES_FRAMES):
+class SeriesPrefetch:
+    """Simulates (or reads from the cache) every frame of the series in a background thread.
+
+    It works onward from the last frame read (:meth:`asked`), wrapping round, so that the frames
+    after the one on screen are ready first; it stops when every frame is cached.
+
+    Parameters
+    ----------
+    n_frames : int
+    """
+
+    def __init__(self, n_frames: int):
+        self.n_frames = int(n_frames)
+        self.made: set[int] = set()
+        self._next = 0
+        self._guard = threading.Lock()
+        self.thread = threading.Thread(target=self._run, name="ssdpc series prefetch", daemon=True)
+        self.thread.start()
+
+    def asked(self, i: int) -> None:
+        """Frame ``i`` was read: go on from the frame after it."""
+        with self._guard:
+            self._next = (int(i) + 1) % self.n_frames
+
+    def _pick(self) -> int | None:
+        with self._guard:
+            order = [(self._next + k) % self.n_frames for k in range(self.n_frames)]
+            return next((i for i in order if i not in self.made), None)
+
+    def _run(self) -> None:
+        while (i := self._pick()) is not None:
+            try:
+                series_frame(i, self.n_frames)
+            except Exception:  # noqa: BLE001 - the frame is simulated again when it is read, with its error
+                return
+            with self._guard:
+                self.made.add(i)
+
+
+def series_array(n_frames: int = SERIES_FRAMES, prefetch: bool = True):
     """Lazy (t, y, x) dask array: frame i is simulated (or read from the cache) when first used.
 
     Parameters
     ----------
     n_frames : int
+    prefetch : bool
+        Simulate the frames in a background thread at once (:class:`SeriesPrefetch`).
 
     Returns
     -------
@@ -237,17 +298,30 @@ def series_array(n_frames: int = SERIES_FRAMES):
 
     optics = series_optics()
     shape = (optics.height_px, optics.width_px)
-    frames = [da.from_delayed(dask.delayed(series_frame)(i, n_frames), shape, dtype=np.uint16) for i in range(n_frames)]
+    ahead = SeriesPrefetch(n_frames) if prefetch else None
+
+    def frame(i: int) -> np.ndarray:
+        if ahead is not None:
+            ahead.asked(i)
+        return series_frame(i, n_frames)
+
+    tag = _key("moving", _physics(optics), SERIES_SOURCE_STEP, __version__)  # names the series for resuming
+    frames = [
+        da.from_delayed(dask.delayed(frame)(i), shape, dtype=np.uint16, name=f"moving-sample-{tag}-{n_frames}-{i}")
+        for i in range(n_frames)
+    ]
     return da.stack(frames)
 
 
-def moving_sample_series(n_frames: int = SERIES_FRAMES):
-    """A swimming cell-like sample in water, ``n_frames`` frames (lazy, simulated on demand), with
-    its flat and white frames.
+def moving_sample_series(n_frames: int = SERIES_FRAMES, prefetch: bool = True):
+    """A swimming cell-like sample in water, ``n_frames`` frames (lazy, simulated in the background
+    and on demand), with its flat and white frames.
 
     Parameters
     ----------
     n_frames : int
+    prefetch : bool
+        Simulate every frame in a background thread from the start (see :func:`series_array`).
 
     Returns
     -------
@@ -257,7 +331,7 @@ def moving_sample_series(n_frames: int = SERIES_FRAMES):
     optics = series_optics()
     meta = _optics_meta(optics, "water")
     lims = _contrast(flat)
-    series = series_array(n_frames)
+    series = series_array(n_frames, prefetch)
     um = frame_transform(optics, 2)  # in the volume's µm (placement.py)
     return [
         (
