@@ -217,7 +217,6 @@ def test_time_series_sample_is_lazy_20_frames(tmp_path, monkeypatch):
     assert layers[-1][1]["metadata"]["ssdpc"]["optics"]["medium_index"] == 1.33
 
 
-
 def test_time_series_sample_is_made_in_the_background_once_each(monkeypatch):
     """Opening the series starts a thread that makes every frame once, onward from the frame read."""
     import threading
@@ -259,6 +258,7 @@ def test_a_cached_frame_is_made_once_when_two_threads_ask(tmp_path, monkeypatch)
         t.join()
     assert len(calls) == 1 and len(out) == 3
     assert all(np.array_equal(o, np.full((3, 5), 7)) for o in out)
+
 
 # ------------------------------------------------- outputs of `ssdpc reconstruct`
 def test_reads_the_cli_reconstruction_outputs(tmp_path):

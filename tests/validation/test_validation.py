@@ -39,6 +39,30 @@ def two_beads(cache):
     return [val.bead_metrics(res, s, 1.518) for s in case.phantom.spheres], case.phantom.spheres
 
 
+@pytest.fixture(scope="module")
+def weak_bead(cache):
+    bead = ph.weak_bead()
+    case = val.simulate_case("weak-bead", bead, val.paper_optics(), cache_dir=cache)
+    res, _, _ = val.reconstruct_case(case, z=(-40, 40), stacks=False)
+    return {
+        **val.bead_metrics(res, bead, 1.518),
+        **val.projected_phase_metrics(res, bead, 1.518, case.optics.wavelength_um),
+        **val.truth_metrics(res, bead, 1.518, (20.7, 3.9)),
+    }
+
+
+def test_weak_bead_projected_phase_within_10_percent(weak_bead):
+    """The 2D number first: a 0.5 rad bead's projected phase, over its footprint and at its centre."""
+    assert weak_bead["phase_footprint_ratio"] == pytest.approx(1.0, abs=0.1)  # measured 1.05
+    assert weak_bead["phase_centre_ratio"] == pytest.approx(1.0, abs=0.1)  # measured 0.94
+
+
+def test_weak_bead_found_at_its_depth(weak_bead):
+    cx, cy, cz = weak_bead["centroid_um"]
+    assert abs(cz - 10.0) < 2.0 and np.hypot(cx, cy) < 1.0  # measured 0.17 µm deep, 0.01 µm aside
+    assert weak_bead["dn_peak"] > 0.3 * 0.007  # measured 0.50 of the true Δn (wotf 0.33)
+
+
 def test_pmma_bead_is_negative_and_in_place(bead):
     assert bead["dn_centre"] < 0 and bead["dn_peak"] < 0
     cx, cy, cz = bead["centroid_um"]
@@ -48,6 +72,14 @@ def test_pmma_bead_is_negative_and_in_place(bead):
 
 def test_pmma_bead_peak_is_at_least_half_the_truth(bead):
     assert bead["dn_peak"] < 0.5 * -0.028  # measured −0.018 (Tikhonov: −0.0075)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured: Δn summed along z through the centre 1.32 x the true optical path (the missing cone's tails)",
+)
+def test_pmma_bead_optical_path_within_10_percent(bead):
+    assert bead["opd_ratio"] == pytest.approx(1.0, rel=0.1)
 
 
 def test_pmma_bead_lateral_fwhm_within_20_percent(bead):
@@ -70,12 +102,20 @@ def test_two_beads_found_at_their_depths(two_beads):
         assert m["dn_peak"] > 0.5 * 0.042  # measured 0.026 and 0.029 (Tikhonov 0.008)
 
 
-def test_cell_correlates_with_the_truth_at_the_system_resolution(cache):
+@pytest.fixture(scope="module")
+def cell(cache):
     case = val.simulate_case("cell", ph.cell(), val.paper_optics(), cache_dir=cache)
     res, _, _ = val.reconstruct_case(case, z=(-40, 40), stacks=False)
-    m = val.cell_metrics(res, case.phantom, (20.7, 3.9))
-    assert m["correlation_blurred"] > 0.85  # measured 0.868 (Tikhonov 0.566); the target 0.9 is not reached
-    assert abs(m["ri_nucleus"] - m["ri_nucleus_blurred_truth"]) < 0.01  # measured 0.004
+    return val.cell_metrics(res, case.phantom, (20.7, 3.9))
+
+
+@pytest.mark.xfail(strict=True, reason="measured: correlation 0.868 with the blurred truth (Tikhonov 0.566)")
+def test_cell_correlates_with_the_truth_at_the_system_resolution(cell):
+    assert cell["correlation_blurred"] >= 0.9  # the issue's target
+
+
+def test_cell_nucleus_ri_matches_the_blurred_truth(cell):
+    assert abs(cell["ri_nucleus"] - cell["ri_nucleus_blurred_truth"]) < 0.01  # measured 0.004
 
 
 def test_bar_target_resolved_at_its_depth(cache):

@@ -261,7 +261,13 @@ class SeriesPrefetch:
         self.thread.start()
 
     def asked(self, i: int) -> None:
-        """Frame ``i`` was read: go on from the frame after it."""
+        """Frame ``i`` was read: go on from the frame after it.
+
+        Parameters
+        ----------
+        i : int
+            The frame read.
+        """
         with self._guard:
             self._next = (int(i) + 1) % self.n_frames
 
@@ -274,7 +280,7 @@ class SeriesPrefetch:
         while (i := self._pick()) is not None:
             try:
                 series_frame(i, self.n_frames)
-            except Exception:  # noqa: BLE001 - the frame is simulated again when it is read, with its error
+            except Exception:  # the frame is simulated again when it is read, and raises there
                 return
             with self._guard:
                 self.made.add(i)

@@ -6,10 +6,12 @@ leaves a missing cone along z, and the phase WOTFs vanish at u = 0, so the mean 
 is not measured at all. A linear (Tikhonov) inverse fills those gaps with zeros: objects come out
 weak, long in z and on a haze. Here they are filled with what we know of a sample instead:
 
-    minimise  ½ Σ_k w_k ‖A_k φ − c_k‖² + λ TV(φ)   subject to  φ ∈ C
+    minimise  ½ Σ_k w_k ‖A_k φ − c_k‖² + λ TV(φ) + (λ/ℓ) ‖φ‖₁   subject to  φ ∈ C
 
 - TV(φ) = Σ |∂x φ| + |∂y φ| + |∂z φ| with differences per µm (anisotropic total variation: a
   sample is made of regions of nearly constant index with sharp edges);
+- ‖φ‖₁ with the length ℓ = ``SPARSITY_PER_RZ`` x R_z: the medium is Δn = 0 wherever the data do
+  not need more (the slice means are not measured);
 - C: the sign of Δn against the medium (``denser``: Δn ≥ 0, ``lighter``: Δn ≤ 0), a bound
   |Δn| ≤ Δn_max, and Δn = 0 outside the field stop. The sign and the field stop give the slice
   means back: a slice whose contrast shows nothing holds nothing, instead of an unknown offset.
@@ -47,7 +49,10 @@ __all__ = ["LAMBDA_PER_NOISE", "SIGNS", "TvInversion", "TvReport", "padded_plane
 SIGNS = ("auto", "denser", "lighter", "any")
 #: ℓ of the sparsity term μ‖φ‖₁ with μ = λ/ℓ, in units of the axial resolution R_z: without it a
 #: constant offset inside the field stop (the unmeasured slice mean) costs only its boundary.
-SPARSITY_PER_RZ = 0.5
+#: Measured (docs/validation.md): 0.5 R_z leaves a haze of noise that the sign constraint keeps
+#: (Σ Δn over the field 3 x a weak bead's); 0.1 R_z cuts it 4-fold and keeps the objects within
+#: 4%; 0.02 R_z starts to eat them (−17%).
+SPARSITY_PER_RZ = 0.1
 #: Over-relaxation of the ADMM splits (1: none; 1.5-1.8 is usual).
 RELAX = 1.6
 #: Warn when the last relative change is above this many times the tolerance.

@@ -474,6 +474,21 @@ def pmma_bead(center_um=(0.0, 0.0, 0.0)) -> Sphere:
     return Sphere(tuple(center_um), 13.0, 1.49, medium_index=1.518)
 
 
+def weak_bead(center_um=(0.0, 0.0, 10.0)) -> Sphere:
+    """A weak bead: 6 µm, n 1.525 in oil 1.518 (Δn +0.007, 0.51 rad through its centre at 520 nm).
+
+    Parameters
+    ----------
+    center_um : (float, float, float)
+        (x, y, z) of the centre, µm.
+
+    Returns
+    -------
+    Sphere
+    """
+    return Sphere(tuple(center_um), 6.0, 1.525, medium_index=1.518)
+
+
 def two_beads() -> Spheres:
     """Two 6 µm beads (n 1.56) in 1.518, at z = -25 µm and z = +30 µm, 40 µm apart in x.
 
