@@ -53,13 +53,13 @@ def weak_bead(cache):
 
 def test_weak_bead_projected_phase_within_10_percent(weak_bead):
     """The 2D number first: a 0.5 rad bead's projected phase, over its footprint and at its centre."""
-    assert weak_bead["phase_footprint_ratio"] == pytest.approx(1.0, abs=0.1)  # measured 1.05
+    assert weak_bead["phase_footprint_ratio"] == pytest.approx(1.0, abs=0.1)  # measured 1.01
     assert weak_bead["phase_centre_ratio"] == pytest.approx(1.0, abs=0.1)  # measured 0.94
 
 
 def test_weak_bead_found_at_its_depth(weak_bead):
     cx, cy, cz = weak_bead["centroid_um"]
-    assert abs(cz - 10.0) < 2.0 and np.hypot(cx, cy) < 1.0  # measured 0.17 µm deep, 0.01 µm aside
+    assert abs(cz - 10.0) < 2.0 and np.hypot(cx, cy) < 1.0  # measured 0.17 µm deep, 0.02 µm aside
     assert weak_bead["dn_peak"] > 0.3 * 0.007  # measured 0.50 of the true Δn (wotf 0.33)
 
 
@@ -67,28 +67,28 @@ def test_pmma_bead_is_negative_and_in_place(bead):
     assert bead["dn_centre"] < 0 and bead["dn_peak"] < 0
     cx, cy, cz = bead["centroid_um"]
     assert np.hypot(cx, cy) < 1.0  # lateral centroid within 1 µm
-    assert abs(cz) < 2.0  # axial centroid within 2 µm (measured +1.8 µm; Tikhonov: +3.1 µm)
+    assert abs(cz) < 2.0  # axial centroid within 2 µm (measured +1.7 µm; Tikhonov: +3.2 µm)
 
 
 def test_pmma_bead_peak_is_at_least_half_the_truth(bead):
-    assert bead["dn_peak"] < 0.5 * -0.028  # measured −0.018 (Tikhonov: −0.0075)
+    assert bead["dn_peak"] < 0.5 * -0.028  # measured −0.021 (Tikhonov: −0.0075)
 
 
 @pytest.mark.xfail(
     strict=True,
-    reason="measured: Δn summed along z through the centre 1.32 x the true optical path (the missing cone's tails)",
+    reason="measured: Δn summed along z through the centre 1.36 x the true optical path (the missing cone's tails)",
 )
 def test_pmma_bead_optical_path_within_10_percent(bead):
     assert bead["opd_ratio"] == pytest.approx(1.0, rel=0.1)
 
 
 def test_pmma_bead_lateral_fwhm_within_20_percent(bead):
-    assert bead["fwhm_x_um"] == pytest.approx(13.0, rel=0.2)  # measured 10.9 µm (Tikhonov 10.2 µm)
+    assert bead["fwhm_x_um"] == pytest.approx(13.0, rel=0.2)  # measured 10.8 µm (Tikhonov 10.2 µm)
     assert bead["fwhm_y_um"] == pytest.approx(13.0, rel=0.2)
 
 
 def test_pmma_bead_axial_fwhm_is_between_the_bead_and_the_papers(bead):
-    # the bead is 13 µm long; the paper measured 21.96 µm; measured 15.3 µm (Tikhonov 22 µm)
+    # the bead is 13 µm long; the paper measured 21.96 µm; measured 14.4 µm (Tikhonov 21 µm)
     assert 13.0 < bead["fwhm_z_um"] < 22.0
 
 
@@ -97,9 +97,9 @@ def test_two_beads_found_at_their_depths(two_beads):
     for m, s in zip(metrics, spheres):
         cx, cy, cz = m["centroid_um"]
         x, y, z = s.center_um
-        assert abs(cz - z) < 2.0  # measured 1.2 and 0.7 µm
+        assert abs(cz - z) < 2.0  # measured 1.1 and 0.7 µm
         assert np.hypot(cx - x, cy - y) < 1.0
-        assert m["dn_peak"] > 0.5 * 0.042  # measured 0.026 and 0.029 (Tikhonov 0.008)
+        assert m["dn_peak"] > 0.5 * 0.042  # measured 0.026 and 0.030 (Tikhonov 0.008)
 
 
 @pytest.fixture(scope="module")
@@ -109,13 +109,15 @@ def cell(cache):
     return val.cell_metrics(res, case.phantom, (20.7, 3.9))
 
 
-@pytest.mark.xfail(strict=True, reason="measured: correlation 0.868 with the blurred truth (Tikhonov 0.566)")
+@pytest.mark.xfail(
+    strict=True, reason="measured: correlation 0.862 with the blurred truth (Tikhonov 0.566; 0.902 at NA 0.25)"
+)
 def test_cell_correlates_with_the_truth_at_the_system_resolution(cell):
-    assert cell["correlation_blurred"] >= 0.9  # the issue's target
+    assert cell["correlation_blurred"] >= 0.9  # the target
 
 
 def test_cell_nucleus_ri_matches_the_blurred_truth(cell):
-    assert abs(cell["ri_nucleus"] - cell["ri_nucleus_blurred_truth"]) < 0.01  # measured 0.004
+    assert abs(cell["ri_nucleus"] - cell["ri_nucleus_blurred_truth"]) < 0.01  # measured 0.006
 
 
 def test_bar_target_resolved_at_its_depth(cache):
