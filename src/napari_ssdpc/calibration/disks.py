@@ -290,7 +290,8 @@ def fit_rim(img, circle: Circle, neighbours, delta: float, dark: float) -> RimFi
     Pixels on rays that ``rim_circle`` rejected (a notch, dust, content on the rim) and
     pixels within R + δ of a neighbouring EI centre (``neighbours`` (N, 2)) are left out;
     after a first fit, pixels beyond 5 robust sigmas are dropped and the fit repeated.
-    None when the fit does not converge near the circle.
+    None when fewer than 40 pixels are left (touching EIs of a 15 px pitch keep about 50) or
+    the fit does not converge near the circle.
 
     Parameters
     ----------
@@ -323,7 +324,7 @@ def fit_rim(img, circle: Circle, neighbours, delta: float, dark: float) -> RimFi
     for q in np.asarray(neighbours, float).reshape(-1, 2):
         keep &= np.hypot(xx - q[0], yy - q[1]) > r0 + delta
     x, y, z = xx[keep], yy[keep], img[y0:y1, x0:x1][keep].astype(float)
-    if z.size < 100:
+    if z.size < 40:
         return None
     in_ring = rho[keep] < r0 - 0.5 * delta
     inner = float(np.median(z[in_ring])) if in_ring.any() else float(z.max())

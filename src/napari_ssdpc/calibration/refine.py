@@ -126,7 +126,7 @@ def refine_centres(img, lat: AffineLattice, circles, n_idx, dark):
 
 #: Below this EI radius (px) a rim fit is not trusted on its own, and an EI beside a dimmer one is set
 #: aside. Measured on white frames with per-lenslet offsets of 2 % of the pitch: from a radius of
-#: 7.5 px (15 px pitch) the held rim fits place every EI within 0.25 px, the lattice alone 0.6-1.3 px.
+#: 7.5 px (15 px pitch) the rim fits place every EI within 0.04 px, the lattice alone 0.3-0.6 px.
 SMALL_EI_PX = 5.0
 
 

@@ -240,6 +240,9 @@ def render(coeffs, centres, optics, sampling, grid, camera):
     # patch is faded on the grid's inscribed circle (object radius L/2), so it holds the whole
     # field stop in every direction and nothing from the next period.
     half = (0.5 * L - 1.0) / s
+    # the fade stays outside the field stop's image: on small sensors (a 15 px pitch) a fixed
+    # TAPER_PX would dim the EI's own rim and shrink the disk by 20 %
+    taper = float(np.clip(0.5 * (half - optics.field_radius_um / s), 1.0, TAPER_PX))
     for (cx, cy), c in zip(centres, coeffs):
         X = np.arange(max(0, math.ceil(cx - half)), min(W, math.floor(cx + half) + 1))
         Y = np.arange(max(0, math.ceil(cy - half)), min(H, math.floor(cy + half) + 1))
@@ -262,9 +265,9 @@ def render(coeffs, centres, optics, sampling, grid, camera):
             img = ndimage.map_coordinates(fine, [(oy - gy[0]) / step, (ox - gx[0]) / step], order=3, mode="nearest")
         img = img * camera.illumination(np.hypot(ox, oy), optics.field_radius_um)
         if axis_aligned:
-            img *= _fade(Y - cy, half)[:, None] * _fade(X - cx, half)[None, :]
+            img *= _fade(Y - cy, half, taper)[:, None] * _fade(X - cx, half, taper)[None, :]
         else:
-            img *= _fade(np.hypot(ox, oy) / s, half)
+            img *= _fade(np.hypot(ox, oy) / s, half, taper)
         frame[Y[0] : Y[-1] + 1, X[0] : X[-1] + 1] += img
     return np.clip(frame, 0.0, None)
 
@@ -272,9 +275,9 @@ def render(coeffs, centres, optics, sampling, grid, camera):
 TAPER_PX = 8.0
 
 
-def _fade(d, half):
-    """1 inside the patch, cosine fade to 0 over the outer TAPER_PX pixels."""
-    t = np.clip((half - np.abs(d)) / TAPER_PX, 0.0, 1.0)
+def _fade(d, half, taper):
+    """1 inside the patch, cosine fade to 0 over its outer ``taper`` pixels."""
+    t = np.clip((half - np.abs(d)) / taper, 0.0, 1.0)
     return 0.5 - 0.5 * np.cos(np.pi * t)
 
 
