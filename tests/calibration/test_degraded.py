@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from napari_ssdpc.calibration.calibrate import calibrate
+from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation import imperfect
@@ -138,3 +139,48 @@ def test_hexagonal_array(rotation_deg, flip_x):
     assert {(ln.row, ln.col) for ln in cal.lenslets} == set(truth)  # the same labels
     du = max(math.hypot(*np.subtract(ln.u, truth[ln.row, ln.col].u)) for ln in cal.lenslets)
     assert du < 1e-3 * optics.pitch_um / (optics.wavelength_um * optics.f_obj_um * optics.m_r)  # 0.1 % of a step
+
+
+# ------------------------------------------------- an array larger than the pupil's image on the sensor
+def small_lenslet_optics(width_px, height_px):
+    """Lenslets of 83 µm and f 2.55 mm (F/30) on 5.6 µm pixels: a 15 px pitch, the objective
+    pupil 36 lenslets across, so the sensor sees a 28 x 28 patch of lit EIs (or fewer)."""
+    d = PAPER.to_dict()
+    d["mla"] = {"pitch_um": 500 / 6, "focal_length_mm": 15.3 / 6, "lenslet_radius_um": 250 / 6, "grid": "square"}
+    d["sensor"] = {**d["sensor"], "pixel_um": 500 / 6 / 15, "width_px": width_px, "height_px": height_px}
+    return Optics.from_dict(d, source="optics")
+
+
+def test_pupil_filling_the_sensor():
+    """A 28 x 28 patch of touching 15 px EIs with strongly blurred rims (w ≈ R/5): only the
+    sensor's corners lie beyond the pupil. The lattice, every EI, the radius and the axis
+    (from the dark corners) are measured."""
+    optics = small_lenslet_optics(430, 420)
+    grid = Grid.nominal(optics, axis_offset_px=(3.3, -2.1), rotation_deg=1.0)
+    worst, tol, r_err, cal = calibrate_degraded(optics, grid, array=imperfect.ArrayErrors(0.02, 0.5, seed=3))
+    axis = math.hypot(*np.subtract(cal.grid.axis_px, grid.axis_px))
+    print(f"28 x 28: worst EI centre {worst:.3f} px, radius {100 * r_err:+.2f} %, axis {axis:.3f} px")
+    assert worst < tol and abs(r_err) < RADIUS_REL
+    assert cal.kind == "white" and cal.kind_evidence["axis"] == "measured" and axis < 0.25
+    assert abs(cal.grid.pitch_px / 15 - 1) < 1e-4
+
+
+def test_every_ei_lit_axis_assumed_or_given():
+    """A 20 x 20 patch inside the pupil: nothing shows the axis. The grid still calibrates;
+    the axis is the sensor centre with a warning naming --axis, or the one given."""
+    optics = small_lenslet_optics(300, 300)
+    grid = Grid.nominal(optics, axis_offset_px=(-4.2, 1.7), rotation_deg=-0.6)
+    cam = Camera()
+    frame = cam.apply(sim.white_intensity(optics, grid, cam), cam.rng(1))
+    with pytest.warns(UserWarning, match="--axis"):
+        cal = calibrate(frame, optics)
+    assert cal.kind == "white" and cal.kind_evidence["axis"] == "sensor centre (assumed)"
+    assert np.allclose(cal.grid.axis_px, (149.5, 149.5)) and not np.isfinite(cal.axis_rms)
+    assert abs(cal.grid.pitch_px / 15 - 1) < 1e-4 and abs(cal.grid.rotation_deg + 0.6) < 0.01
+    cal = calibrate(frame, optics, axis=grid.axis_px)
+    assert np.allclose(cal.grid.axis_px, grid.axis_px) and cal.kind_evidence["axis"] == "given"
+    truth = grid.lattice_px([ln.row for ln in cal.lenslets], [ln.col for ln in cal.lenslets])
+    on = cal.measured
+    assert np.abs(truth[on] - cal.centres_px[on]).max() < 0.5 and on.sum() > 300
+    with pytest.raises(SsdpcError, match="--axis"):
+        calibrate(frame, optics, axis=(400.0, 10.0))

@@ -359,3 +359,12 @@ def test_an_unforeseen_fault_is_still_one_line(cli, monkeypatch, error, words):
     monkeypatch.setattr(design, "design_table", fail)
     rc, err = cli(["design"])
     assert rc == 2 and words in err
+
+
+def test_calibrate_with_a_given_axis(files, sums, cli, tmp_path):
+    """--axis replaces the measured axis (kept in the JSON as given); one off the frame is refused."""
+    rc, err = cli(["calibrate", files / "white.tif", "-o", tmp_path / "cal.json", "--axis", "-5", "10"])
+    assert rc == 2 and "--axis X Y inside it" in err and not (tmp_path / "cal.json").exists()
+    assert cli(["calibrate", files / "white.tif", "-o", tmp_path / "cal.json", "--axis", "1220.5", "1030.25"])[0] == 0
+    d = json.loads((tmp_path / "cal.json").read_text())
+    assert d["axis_px"] == [1220.5, 1030.25] and d["kind_evidence"]["axis"] == "given" and d["axis_rms"] is None

@@ -113,6 +113,8 @@ def fit_axis(xy, b, radius_um, um_per_px, optics, tilt):
     xy, b = xy[ok], b[ok]
     r_ml = optics.lenslet_radius_um
     c_guess = float(np.percentile(b, 10))
+    if c_guess > 0.5 * float(b.max()):  # nearly every EI lit (the pupil fills the sensor)
+        c_guess = float(b.min())
     wt = np.clip(b - c_guess, 0, None)
     axis0 = (xy * wt[:, None]).sum(0) / wt.sum()
     near = np.hypot(*(xy - axis0).T) * um_per_px < radius_um + r_ml + 1.5 * optics.pitch_um
@@ -222,9 +224,13 @@ def decide_kind(img, b, centres, r_ei, optics) -> tuple[str, bool, dict]:
     evidence : dict
     """
     ok = np.isfinite(b)
-    bb = b[ok] - np.percentile(b[ok], 5)
+    floor = float(np.percentile(b[ok], 5))
+    # the dim EIs give the floor; where every EI is lit (the pupil larger than the sensor) the
+    # floor is the dark level, already removed
+    bb = b[ok] - (floor if floor < 0.5 * float(b[ok].max()) else 0.0)
     n_lit = int(np.count_nonzero(bb > 0.25 * bb.max()))
-    n_pupil = max(1, sum(1 for ln in optics.lenslets() if ln.fraction >= 0.25))
+    # the pupil's lenslets, at most as many as the sensor holds
+    n_pupil = max(1, min(sum(1 for ln in optics.lenslets() if ln.fraction >= 0.25), int(ok.sum())))
     score = content_score(img, centres, r_ei)
     full = n_lit >= FULL_PUPIL * n_pupil
     has_content = bool(np.isfinite(score) and score > SAMPLE_SCORE)

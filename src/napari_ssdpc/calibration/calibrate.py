@@ -58,6 +58,7 @@ DEVIATION_WARN = 0.02  # warn when a lenslet sits more than 2 % of the pitch off
 MAX_LATTICE_RMS = 0.05  # rms of the EI centres about the lattice, as a fraction of the pitch
 MAX_AXIS_RMS = 0.05  # rms of the brightness-pattern fit, relative to full brightness
 FEW_LENSLETS = 20  # with fewer lit lenslets the illumination envelope is not fitted
+MIN_DARK_CELLS = 4  # a white frame with fewer dark EIs on the sensor does not show the pupil's edge
 # EI brightness is the mean inside this fraction of the EI radius: the centre, away from
 # the diffraction-blurred rim, without a sample; nearly the whole EI with a sample, which
 # moves light around inside the EI but mostly keeps it there.
@@ -103,7 +104,7 @@ def _measure_disks(img, cand: Candidates, radius, pitch):
 
 
 # ------------------------------------------------------------------ calibrate
-def calibrate(frame, optics: Optics, *, kind: str = "auto", guess=None) -> Calibration:
+def calibrate(frame, optics: Optics, *, kind: str = "auto", guess=None, axis=None) -> Calibration:
     """Measure the lenslet grid and the optical axis on one raw frame.
 
     Parameters
@@ -121,6 +122,11 @@ def calibrate(frame, optics: Optics, *, kind: str = "auto", guess=None) -> Calib
     guess : array_like (N, 2), optional
         Rough EI centres (x, y) px, e.g. clicked in napari; they replace the automatic
         detection (within about a fifth of the EI radius is enough).
+    axis : (float, float), optional
+        The optical axis (x, y) px, when known from elsewhere; it replaces the one measured
+        from the brightness pattern. A white frame whose every EI is lit (the objective
+        pupil larger than the sensor) cannot show the axis: without ``axis`` it is taken at
+        the sensor centre, with a warning.
 
     Returns
     -------
@@ -174,6 +180,11 @@ def calibrate(frame, optics: Optics, *, kind: str = "auto", guess=None) -> Calib
         )
     # per-lenslet centres: every reliable, bright rim that agrees with the lattice
     keep = reliable & bright & (np.hypot(res[:, 0], res[:, 1]) < OUTLIER * lat.pitch)
+    # an EI cut by the frame's edge shows part of its rim, which leaves its centre and radius
+    # trading off: its lattice position is better (0.5 px better on a 15 px pitch)
+    H, W = img.shape
+    edge = 1.2 * r_ei + 1  # the rim and its blur
+    keep &= np.all((xy > edge) & (xy < np.array([W, H]) - 1 - edge), axis=1)
     if trusted.sum() < MIN_AFFINE:  # a few lit EIs fix a square lattice better than their own rims
         keep[:] = False
     meas = {tuple(int(v) for v in n): c for n, c, k in zip(n_idx, xy, keep) if k}
@@ -190,7 +201,15 @@ def calibrate(frame, optics: Optics, *, kind: str = "auto", guess=None) -> Calib
         evidence = {**evidence, "certainty": "given"}
     if _INNER[kind] != _INNER["white"]:
         b_all = ei_brightness(img, xy_all, r_ei, _INNER[kind])
-    axis, axis_rms, par = _axis(xy_all, b_all, lat, optics, full, kind)
+    if axis is None:
+        axis, axis_rms, par = _axis(xy_all, b_all, lat, optics, full, kind, img.shape)
+        evidence["axis"] = "sensor centre (assumed)" if par is None else "measured"
+    else:
+        axis, axis_rms, par = _given_axis(axis, img.shape), float("nan"), None
+        evidence["axis"] = "given"
+    if par is None:  # no brightness model: brightness relative to the lit EIs' median
+        lit = b_all[np.isfinite(b_all)]
+        par = np.array([0.0, 0.0, float(np.median(lit[lit > 0.5 * lit.max()])), 0.0])
 
     # 3. grid, labels and the per-lenslet table from the measured centres
     grid, shift = _make_grid(lat, axis, optics)
@@ -246,14 +265,26 @@ def _check_prior(lat: AffineLattice, r_ei: float, optics: Optics) -> None:
         )
 
 
-def _axis(xy_all, b_all, lat, optics, full, kind):
+def _axis(xy_all, b_all, lat, optics, full, kind, shape):
     """Optical axis from the brightness pattern: the objective pupil when the whole pupil
-    is lit, else the condenser disk. Returns axis (x, y) px, relative rms, fit parameters."""
+    is lit, else the condenser disk. Returns axis (x, y) px, relative rms, fit parameters
+    (None when the pupil's edge is off the sensor and the axis is assumed)."""
     um_per_px = optics.pitch_um / lat.pitch
     r_pupil = optics.pupil_radius_mla_um
     if full:
         ok = np.isfinite(b_all)
         lit = int(np.count_nonzero(b_all[ok] > np.percentile(b_all[ok], 5) + 0.25 * np.ptp(b_all[ok])))
+        dark = int(np.count_nonzero(b_all[ok] < 0.25 * b_all[ok].max()))
+        if dark < MIN_DARK_CELLS:  # every EI lit: the pupil's edge is off the sensor
+            centre = _given_axis(None, shape)
+            warnings.warn(
+                f"all {int(ok.sum())} elemental images on the sensor are lit, so the objective pupil's edge "
+                f"(the optical axis) is not on this frame; the axis is taken at the sensor centre "
+                f"({centre[0]:.1f}, {centre[1]:.1f}) px. If it is elsewhere, give it: ssdpc calibrate --axis X Y",
+                SsdpcWarning,
+                stacklevel=3,
+            )
+            return centre, float("nan"), None
         axis, axis_rms, axis_sig, par = fit_axis(xy_all, b_all, r_pupil, um_per_px, optics, tilt=lit >= FEW_LENSLETS)
         what = f"the objective pupil (NA {optics.na})"
     else:
@@ -281,6 +312,17 @@ def _axis(xy_all, b_all, lat, optics, full, kind):
             stacklevel=3,
         )
     return axis, axis_rms, par
+
+
+def _given_axis(axis, shape) -> np.ndarray:
+    """``axis`` (x, y) px checked to lie on the frame; None: the sensor centre."""
+    H, W = shape
+    if axis is None:
+        return np.array([(W - 1) / 2, (H - 1) / 2])
+    a = np.asarray(axis, float).ravel()
+    if a.shape != (2,) or not np.all(np.isfinite(a)) or not (0 <= a[0] <= W - 1 and 0 <= a[1] <= H - 1):
+        raise SsdpcError(f"axis {axis} must be (x, y) in px on the {W} x {H} frame; give --axis X Y inside it")
+    return a
 
 
 def _make_grid(lat: AffineLattice, axis, optics) -> tuple[Grid, np.ndarray]:

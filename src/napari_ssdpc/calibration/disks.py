@@ -274,8 +274,8 @@ def _edge_jac(p, x, y, z, c0, r0, scale):
 
 @dataclass
 class RimFit:
-    """Sub-pixel EI rim: centre (x, y) px, radius px, rim width px, brightness (frame
-    units above the offset), centre uncertainty σ px."""
+    """Sub-pixel EI rim: centre (x, y) px, radius px (of the disk before its blur), rim width
+    px, brightness (frame units above the offset), centre uncertainty σ px."""
 
     centre: np.ndarray
     radius: float
@@ -352,4 +352,6 @@ def fit_rim(img, circle: Circle, neighbours, delta: float, dark: float) -> RimFi
     except np.linalg.LinAlgError:
         return None
     sig = float(math.sqrt(max(cov[0, 0] + cov[1, 1], 0) / 2))
-    return RimFit(np.array([cx, cy]), float(R), float(w), float(a0), sig)
+    # a blurred disk's half-level contour lies w²/(2R) inside its edge (the blur reaches further
+    # into the outside of a convex rim): the disk's own radius, within 0.1 % up to w = R/5
+    return RimFit(np.array([cx, cy]), float(R + w * w / (2 * R)), float(w), float(a0), sig)

@@ -48,7 +48,8 @@ class Calibration:
     residual_px : float
         rms deviation of the measured EI centres from the fitted affine lattice, px.
     axis_rms : float
-        rms of the brightness-pattern fit that gave the axis, relative to full brightness.
+        rms of the brightness-pattern fit that gave the axis, relative to full brightness
+        (NaN where the axis was given or assumed: ``kind_evidence["axis"]``).
     kind : str
         "white", "flat" or "sample"; ``kind_evidence`` says why and how sure.
     deviation_px : ndarray (K, 2)
@@ -175,7 +176,7 @@ class Calibration:
             "rotation_deg": float(self.grid.rotation_deg),
             "ei_radius_px": float(self.ei_radius_px),
             "residual_px": float(self.residual_px),
-            "axis_rms": float(self.axis_rms),
+            "axis_rms": float(self.axis_rms) if np.isfinite(self.axis_rms) else None,  # None: not measured
             "n_fitted": int(self.n_fitted),
             "max_deviation_px": self.max_deviation_px,
             "shear_deg": float(self.shear_deg),
@@ -234,7 +235,7 @@ class Calibration:
                 centres_px=centres,
                 brightness=bright,
                 residual_px=float(d["residual_px"]),
-                axis_rms=float(d["axis_rms"]),
+                axis_rms=float("nan") if d["axis_rms"] is None else float(d["axis_rms"]),
                 kind=str(d["kind"]),
                 n_fitted=int(d.get("n_fitted", 0)),
                 version=int(d["version"]),

@@ -79,7 +79,7 @@ def cmd_calibrate(args):
     )
     optics = _optics(args.optics)
     frame = read_frame(args.frame, allow_series=False, name="white frame")
-    cal = calibrate(frame, optics)
+    cal = calibrate(frame, optics, axis=args.axis)
     overlay_png(frame, cal, png)  # the overlay first: a failure leaves no new JSON without its overlay
     cal.to_json(out)
     g = cal.grid

@@ -69,6 +69,14 @@ def build_parser():
     s.add_argument("frame", help="white frame TIFF")
     s.add_argument("--optics", help=optics_help)
     s.add_argument("-o", "--output", required=True, help="calibration JSON to write (a PNG overlay goes beside it)")
+    s.add_argument(
+        "--axis",
+        type=float,
+        nargs=2,
+        metavar=("X", "Y"),
+        help="the optical axis on the sensor, px, where the frame cannot show it (every EI lit); "
+        "default: measured from the EI brightness",
+    )
     s.add_argument("--overwrite", action="store_true", help=overwrite_help)
     s.set_defaults(func=cmd_calibrate)
 
