@@ -197,6 +197,23 @@ SAMPLE_SCORE = 5.0
 FULL_PUPIL = 0.6
 
 
+def pupil_lenslets(optics, n_cells: int) -> int:
+    """Lenslets at least a quarter inside the objective pupil, at most as many as the sensor
+    holds (``n_cells`` lattice cells): what a white frame lights.
+
+    Parameters
+    ----------
+    optics : Optics
+    n_cells : int
+        Lattice cells on the sensor.
+
+    Returns
+    -------
+    int
+    """
+    return max(1, min(sum(1 for ln in optics.lenslets() if ln.fraction >= 0.25), n_cells))
+
+
 def decide_kind(img, b, centres, r_ei, optics) -> tuple[str, bool, dict]:
     """Kind of frame, whether its lit pattern fills the objective pupil, and the evidence.
 
@@ -229,8 +246,7 @@ def decide_kind(img, b, centres, r_ei, optics) -> tuple[str, bool, dict]:
     # floor is the dark level, already removed
     bb = b[ok] - (floor if floor < 0.5 * float(b[ok].max()) else 0.0)
     n_lit = int(np.count_nonzero(bb > 0.25 * bb.max()))
-    # the pupil's lenslets, at most as many as the sensor holds
-    n_pupil = max(1, min(sum(1 for ln in optics.lenslets() if ln.fraction >= 0.25), int(ok.sum())))
+    n_pupil = pupil_lenslets(optics, int(ok.sum()))
     score = content_score(img, centres, r_ei)
     full = n_lit >= FULL_PUPIL * n_pupil
     has_content = bool(np.isfinite(score) and score > SAMPLE_SCORE)

@@ -27,7 +27,7 @@ import warnings
 
 import numpy as np
 
-from napari_ssdpc.calibration.axis import all_cells, decide_kind, ei_brightness, fit_axis
+from napari_ssdpc.calibration.axis import FULL_PUPIL, all_cells, decide_kind, ei_brightness, fit_axis, pupil_lenslets
 from napari_ssdpc.calibration.disks import Candidates, Circle, find_disks, noise_sigma, rim_circle
 from napari_ssdpc.calibration.lattice_fit import MIN_AFFINE, AffineLattice, assign
 from napari_ssdpc.calibration.overlay import overlay_png
@@ -167,9 +167,10 @@ def calibrate(frame, optics: Optics, *, kind: str = "auto", guess=None, axis=Non
     circles, n_idx, bright = all_rims(img, lat, circles, n_idx)
     xy, sig, radii, held = refine_centres(img, lat, circles, n_idx, cand.dark)
     # a neighbour's skirt pulls some rims; the soft-disk fit models it on EIs that are not small
-    reliable = ~outshone(img, xy, n_idx, float(np.median(radii)))
-    reliable |= held & (float(np.median(radii)) >= SMALL_EI_PX)
-    lat, res, trusted = fit_lattice(xy, n_idx, sig, lat.pitch, flip, reliable, lat.cell)
+    shone = outshone(img, xy, n_idx, float(np.median(radii)))
+    reliable = ~shone | (held & (float(np.median(radii)) >= SMALL_EI_PX))
+    whole = bool(bright.sum() >= FULL_PUPIL * pupil_lenslets(optics, len(all_cells(lat, img.shape))))
+    lat, res, trusted = fit_lattice(xy, n_idx, sig, lat.pitch, flip, reliable, lat.cell, whole_array=whole)
     _check_prior(lat, float(np.median(radii[trusted])), optics)
     r_ei = float(np.median(radii[trusted]))
     rms = float(np.sqrt(np.mean(np.sum(res[trusted] ** 2, axis=1))))
@@ -185,8 +186,11 @@ def calibrate(frame, optics: Optics, *, kind: str = "auto", guess=None, axis=Non
     H, W = img.shape
     edge = 1.2 * r_ei + 1  # the rim and its blur
     keep &= np.all((xy > edge) & (xy < np.array([W, H]) - 1 - edge), axis=1)
-    if trusted.sum() < MIN_AFFINE:  # a few lit EIs fix a square lattice better than their own rims
-        keep[:] = False
+    if trusted.sum() < MIN_AFFINE and not whole:
+        # a few lit EIs of a flat or sample frame: a lit neighbour's skirt pulls the rim of a dim EI
+        # by pixels; only rims that nothing outshines keep their own centre (a small array's white
+        # frame lights all its EIs and keeps them all)
+        keep &= held & ~shone
     meas = {tuple(int(v) for v in n): c for n, c, k in zip(n_idx, xy, keep) if k}
 
     # 2. optical axis and kind from the brightness pattern of all EIs

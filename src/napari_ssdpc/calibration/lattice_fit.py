@@ -101,11 +101,11 @@ class AffineLattice:
 MIN_AFFINE = 12  # with fewer EIs the lattice is a similarity (pitch, rotation): a square
 
 
-def fit_affine(xy, n, flip, weights=None, cell=None) -> tuple[AffineLattice, np.ndarray]:
+def fit_affine(xy, n, flip, weights=None, cell=None, min_affine=MIN_AFFINE) -> tuple[AffineLattice, np.ndarray]:
     """Weighted least squares of centres xy (K, 2) on indices n (K, 2); returns the
     lattice and the residuals (K, 2) px.
 
-    With ``MIN_AFFINE`` or more centres the lattice is affine (6 parameters); with fewer
+    With ``min_affine`` (default ``MIN_AFFINE``) or more centres the lattice is affine (6 parameters); with fewer
     it is the array's ideal lattice (origin, pitch, rotation: x = ox + α n'x − β n'y,
     y = oy + β n'x + α n'y with n' = F C n), which extrapolates safely to the dark lenslets.
 
@@ -121,6 +121,8 @@ def fit_affine(xy, n, flip, weights=None, cell=None) -> tuple[AffineLattice, np.
         1/σ² of each centre.
     cell : ndarray, (2, 2), optional
         Unit cell in pitches (square by default).
+    min_affine : int
+        Fewest centres for the affine model.
 
     Returns
     -------
@@ -131,7 +133,7 @@ def fit_affine(xy, n, flip, weights=None, cell=None) -> tuple[AffineLattice, np.
     xy, n = np.asarray(xy, float), np.asarray(n, float)
     cell = np.eye(2) if cell is None else np.asarray(cell, float)
     w = np.sqrt(np.ones(len(xy)) if weights is None else np.asarray(weights, float))
-    if len(xy) >= MIN_AFFINE:
+    if len(xy) >= min_affine:
         A = np.stack([np.ones(len(n)), n[:, 0], n[:, 1]], 1) * w[:, None]
         sol = np.linalg.lstsq(A, xy * w[:, None], rcond=None)[0]  # (3, 2)
         lat = AffineLattice(sol[0].copy(), sol[1:].T.copy(), flip, cell)

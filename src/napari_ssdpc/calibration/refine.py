@@ -22,6 +22,8 @@ OUTLIER = 0.08  # a rim fit more than 8 % of the pitch off the lattice is not tr
 #: With few EIs, a centre the others predict worse than this fraction of the pitch (and 4 x worse
 #: than the rest) is dropped: one pulled rim would otherwise move the whole lattice.
 LOO_OUTLIER = 0.005
+#: A small array's white frame (every lenslet in the pupil lit) fixes an affine lattice from this many EIs.
+MIN_AFFINE_LIT = 6
 DIM_EDGE = 0.25  # EIs with a rim less steep than this x the median take their lattice position
 
 _OFFSETS = np.array([(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)], float)
@@ -162,7 +164,7 @@ def outshone(img, xy, n, radius):
     return out
 
 
-def fit_lattice(xy, n, sig, pitch, flip, usable, cell):
+def fit_lattice(xy, n, sig, pitch, flip, usable, cell, whole_array=False):
     """Affine lattice through the usable measured centres (weights 1/σ²), without outliers.
 
     Returns the lattice, the residuals (K, 2) and a mask of the trusted centres.
@@ -183,6 +185,10 @@ def fit_lattice(xy, n, sig, pitch, flip, usable, cell):
         Centres that may fix the lattice.
     cell : ndarray, (2, 2)
         Unit cell in pitches.
+    whole_array : bool
+        Every lenslet in the pupil is lit (a white frame of a small array): from
+        ``MIN_AFFINE_LIT`` centres the lattice is affine (its shear is measured), and no centre
+        is left out for disagreeing with few others (a real array's own scatter).
 
     Returns
     -------
@@ -191,9 +197,10 @@ def fit_lattice(xy, n, sig, pitch, flip, usable, cell):
         px.
     trusted : ndarray, bool, (K,)
     """
+    min_affine = MIN_AFFINE_LIT if whole_array else MIN_AFFINE
     w = 1.0 / np.maximum(sig, 2e-4 * pitch) ** 2
     trusted = usable.copy() if usable.sum() >= MIN_EIS else np.ones(len(xy), bool)
-    lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted], cell)
+    lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted], cell, min_affine)
     res = xy - lat.centres(n)
     for _ in range(3):
         rr = np.hypot(res[:, 0], res[:, 1])
@@ -201,11 +208,11 @@ def fit_lattice(xy, n, sig, pitch, flip, usable, cell):
         if new.sum() < MIN_EIS or np.array_equal(new, trusted):
             break
         trusted = new
-        lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted], cell)
+        lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted], cell, min_affine)
         res = xy - lat.centres(n)
-    if MIN_EIS < trusted.sum() < MIN_AFFINE:
+    if MIN_EIS < trusted.sum() < MIN_AFFINE and not whole_array:
         trusted = leave_one_out(xy, n, w, flip, cell, trusted, pitch)
-        lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted], cell)
+        lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted], cell, min_affine)
         res = xy - lat.centres(n)
     return lat, res, trusted
 
