@@ -129,3 +129,58 @@ def test_operators_pickle_without_their_scratch_buffers():
     copy = pickle.loads(pickle.dumps(rl))
     assert copy.bk.device == "cpu" and pickle.loads(pickle.dumps(get_backend("cpu"))).xp is np
     np.testing.assert_array_equal(copy.run(views, 3).stack, before)
+
+
+# ------------------------------------------------------------ the phase methods on a device
+def test_the_fake_device_keeps_cupys_rules():
+    """The stand-in the device tests use refuses what CuPy refuses: host and device arrays meet
+    only through bk.asarray and bk.to_host."""
+    from fake_device import fake_gpu
+
+    bk = fake_gpu()
+    d = bk.asarray(np.ones(3, np.float32))
+    with pytest.raises(TypeError, match="use bk.xp.sum"):
+        np.sum(d)
+    with pytest.raises(TypeError, match="move it with bk.asarray"):
+        d + np.ones(3, np.float32)
+    with pytest.raises(TypeError, match="bk.to_host"):
+        np.asarray(d)
+    assert float(bk.xp.sum(d * 2)) == 6.0 and np.array_equal(bk.to_host(d), np.ones(3))
+
+
+def _tv_on(device):
+    from napari_ssdpc.physics import transfer
+    from napari_ssdpc.reconstruction.forward import ViewModel
+    from napari_ssdpc.reconstruction.regularised import TvInversion, padded_planes
+    from napari_ssdpc.reconstruction.wotf import WotfInversion
+
+    optics = Optics.paper().replace(condenser_na=0.3)
+    lenslets = [ln for ln in optics.lenslets() if transfer.lenslet_case(optics, ln) == "straddling"][:8]
+    yy, xx = np.mgrid[:64, :64]
+    mask = np.hypot(yy - 32, xx - 32) < 30
+    zs, planes = padded_planes(np.arange(-10.0, 10.1, 2.0), 20.0)
+    model = ViewModel(optics, lenslets, (64, 64), 0.8456, zs, backend=device)
+    rng = np.random.default_rng(0)
+    c = (rng.normal(0, 1e-2, (model.n_views, 64, 64)) * mask).astype(np.float32)
+    c[:, 28:36, 30:38] += 0.05  # something for the solve to find
+    warm = WotfInversion(model.planes(planes), 1e-2).phase(c)
+    return warm, TvInversion(model, planes, 20.0, mask=mask).phase(c, warm=warm, sign="auto", phi_max=1.0)
+
+
+def test_tv_and_wotf_run_on_a_device_backend():
+    from fake_device import fake_gpu
+
+    (w_cpu, (tv_cpu, rep_cpu)), (w_dev, (tv_dev, rep_dev)) = _tv_on("cpu"), _tv_on(fake_gpu())
+    assert isinstance(w_dev, np.ndarray) and isinstance(tv_dev, np.ndarray)
+    assert np.abs(tv_cpu).max() > 0
+    np.testing.assert_allclose(w_dev, w_cpu, rtol=0, atol=1e-6 * np.abs(w_cpu).max())
+    np.testing.assert_allclose(tv_dev, tv_cpu, rtol=0, atol=1e-5 * np.abs(tv_cpu).max())
+    assert rep_dev.iterations == rep_cpu.iterations and rep_dev.sign == rep_cpu.sign
+
+
+@needs_gpu
+def test_gpu_tv_matches_the_cpu():
+    (w_cpu, (tv_cpu, _)), (w_gpu, (tv_gpu, rep)) = _tv_on("cpu"), _tv_on("gpu")
+    assert isinstance(tv_gpu, np.ndarray) and rep.iterations > 0
+    assert np.max(np.abs(w_gpu - w_cpu)) <= 1e-4 * np.abs(w_cpu).max()
+    assert np.max(np.abs(tv_gpu - tv_cpu)) <= 1e-3 * np.abs(tv_cpu).max()

@@ -82,10 +82,11 @@ class Backend:
             self.xp.cuda.get_current_stream().synchronize()
 
     # ----------------------------------------------------------------- FFT
-    def _kw(self):
-        return {"workers": self.workers} if not self.is_gpu else {}
+    def _kw(self, norm):
+        kw = {} if self.is_gpu else {"workers": self.workers}
+        return kw if norm is None else {**kw, "norm": norm}
 
-    def rfft2(self, a, s=None):
+    def rfft2(self, a, s=None, norm=None):
         """Real 2D FFT over the last two axes (threaded on the CPU).
 
         Parameters
@@ -93,14 +94,16 @@ class Backend:
         a : ndarray, real, (..., P, Q)
         s : (int, int), optional
             Padded shape.
+        norm : {None, 'ortho'}
+            As in scipy.fft.
 
         Returns
         -------
         ndarray, complex, (..., P, Q//2+1)
         """
-        return self.fft.rfft2(a, s=s, **self._kw())
+        return self.fft.rfft2(a, s=s, **self._kw(norm))
 
-    def irfft2(self, a, s):
+    def irfft2(self, a, s, norm=None):
         """Inverse of :meth:`rfft2`.
 
         Parameters
@@ -108,12 +111,43 @@ class Backend:
         a : ndarray, complex, (..., P, Q//2+1)
         s : (int, int)
             Output shape (P, Q).
+        norm : {None, 'ortho'}
 
         Returns
         -------
         ndarray, real, (..., P, Q)
         """
-        return self.fft.irfft2(a, s=s, **self._kw())
+        return self.fft.irfft2(a, s=s, **self._kw(norm))
+
+    def rfftn(self, a, norm=None):
+        """Real FFT over every axis.
+
+        Parameters
+        ----------
+        a : ndarray, real
+        norm : {None, 'ortho'}
+
+        Returns
+        -------
+        ndarray, complex, the last axis n//2+1 long
+        """
+        return self.fft.rfftn(a, **self._kw(norm))
+
+    def irfftn(self, a, s, norm=None):
+        """Inverse of :meth:`rfftn`.
+
+        Parameters
+        ----------
+        a : ndarray, complex
+        s : tuple of int
+            Output shape.
+        norm : {None, 'ortho'}
+
+        Returns
+        -------
+        ndarray, real, shape ``s``
+        """
+        return self.fft.irfftn(a, s=s, **self._kw(norm))
 
     def rfft(self, a, axis=-1):
         """Real 1D FFT along ``axis``.
@@ -127,7 +161,7 @@ class Backend:
         -------
         ndarray, complex
         """
-        return self.fft.rfft(a, axis=axis, **self._kw())
+        return self.fft.rfft(a, axis=axis, **self._kw(None))
 
     def irfft(self, a, n, axis=-1):
         """Inverse of :meth:`rfft`.
@@ -143,7 +177,7 @@ class Backend:
         -------
         ndarray, real
         """
-        return self.fft.irfft(a, n=n, axis=axis, **self._kw())
+        return self.fft.irfft(a, n=n, axis=axis, **self._kw(None))
 
     def fft_(self, a, n=None, axis=-1):
         """Complex 1D FFT along ``axis``.
@@ -159,9 +193,9 @@ class Backend:
         -------
         ndarray, complex
         """
-        return self.fft.fft(a, n=n, axis=axis, **self._kw())
+        return self.fft.fft(a, n=n, axis=axis, **self._kw(None))
 
-    def ifft(self, a, n=None, axis=-1):
+    def ifft(self, a, n=None, axis=-1, norm=None):
         """Inverse of :meth:`fft_`.
 
         Parameters
@@ -170,12 +204,13 @@ class Backend:
         n : int, optional
             Transform length.
         axis : int
+        norm : {None, 'ortho'}
 
         Returns
         -------
         ndarray, complex
         """
-        return self.fft.ifft(a, n=n, axis=axis, **self._kw())
+        return self.fft.ifft(a, n=n, axis=axis, **self._kw(norm))
 
 
 def _cpu(workers=-1) -> Backend:

@@ -9,9 +9,11 @@ The WOTFs vanish beyond |u| = 2ρ (the autocorrelation of a sub-aperture of radi
 and phase are real, so only the half spectrum of a real FFT inside that disk carries anything:
 the box :class:`~napari_ssdpc.reconstruction.deconvolution.Band` keeps. Per frequency p of that
 box the model is a K x Z matrix A_p; the operator stores all of them as one (P, K, Z) complex64
-array, so every sum over planes or views is one batched matrix product (``np.matmul``) over
+array, so every sum over planes or views is one batched matrix product (``@``, NumPy or CuPy) over
 contiguous memory. Both phase methods (:mod:`.wotf` and :mod:`.regularised`) use one instance,
-built once per optics, lenslets, view grid and z grid.
+built once per optics, lenslets, view grid and z grid. It is built on the host and then lives
+on the device of its :class:`~napari_ssdpc.reconstruction.backend.Backend` (NumPy or CuPy), as do
+the arrays its methods return; the inversions copy their results back with ``bk.to_host``.
 
 The views are weighted by w_k = √(I0_k / max I0): the normalised contrast of a dim view is
 noisier (shot noise), so the weighted contrast has the same noise in every view.
@@ -22,10 +24,10 @@ from __future__ import annotations
 import copy
 
 import numpy as np
-import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics import transfer
+from napari_ssdpc.reconstruction.backend import Backend, get_backend
 from napari_ssdpc.reconstruction.deconvolution import Band
 from napari_ssdpc.settings.optics import Optics
 
@@ -52,21 +54,36 @@ class ViewModel:
         ``progress(done, total, 'operators')`` while the planes are built.
     chunk : int
         Planes built at a time (memory).
+    backend : {'cpu', 'gpu'} or Backend, optional
+        Where the model lives and the inversions run (default: the CPU).
 
     Attributes
     ----------
-    a : ndarray, complex64, shape (P, K, Z)
-        The model per band frequency.
-    w : ndarray, float32, shape (K,)
+    a : ndarray (NumPy or CuPy), complex64, shape (P, K, Z)
+        The model per band frequency, on the backend's device.
+    w : numpy.ndarray, float32, shape (K,)
         The views' weights.
     band : Band
         Where the P frequencies lie in an rfft2 spectrum of ``shape`` (rows by columns, row-major).
-    multiplicity : ndarray, float32, shape (P,)
+    multiplicity : ndarray (NumPy or CuPy), float32, shape (P,)
         How often each frequency appears in the full spectrum (1 for column 0, else 2): sums over
         the half band times this are sums over the whole spectrum (Parseval).
     """
 
-    def __init__(self, optics: Optics, lenslets, shape, pixel_um, z_um, *, i0=None, progress=None, chunk: int = 16):
+    def __init__(
+        self,
+        optics: Optics,
+        lenslets,
+        shape,
+        pixel_um,
+        z_um,
+        *,
+        i0=None,
+        progress=None,
+        chunk: int = 16,
+        backend: str | Backend | None = None,
+    ):
+        self.bk = bk = get_backend(backend)
         self.shape = tuple(int(n) for n in shape)
         self.pixel_um = float(pixel_um)
         self.z_um = np.atleast_1d(np.asarray(z_um, float))
@@ -80,20 +97,22 @@ class ViewModel:
         by, bx = self.band.box_shape
         k, nz = len(i0), len(self.z_um)
         weight = (self.w / i0_model).astype(np.float32)[None, :, None, None]
-        self.a = np.empty((by * bx, k, nz), np.complex64)
+        a = np.empty((by * bx, k, nz), np.complex64)
         for start in range(0, nz, chunk):
             _, hp = setup.band(self.z_um[start : start + chunk])  # (z, K, my, mx), unshifted order
             if self.band.is_full:
                 hp = setup.embed(hp)
             hp = (hp[..., :bx] * weight).astype(np.complex64)  # columns 0..bx−1: the half band
-            self.a[:, :, start : start + len(hp)] = hp.reshape(len(hp), k, by * bx).transpose(2, 1, 0)
+            a[:, :, start : start + len(hp)] = hp.reshape(len(hp), k, by * bx).transpose(2, 1, 0)
             if progress is not None:
                 progress(min(start + chunk, nz), nz, "operators")
         mult = np.full(self.band.box_shape, 2.0, np.float32)
         mult[:, 0] = 1.0
         if self.shape[1] % 2 == 0 and bx == self.shape[1] // 2 + 1:
             mult[:, -1] = 1.0  # the Nyquist column of an even width
-        self.multiplicity = mult.ravel()
+        self.a = bk.asarray(a)
+        self.multiplicity = bk.asarray(mult.ravel())
+        self._w = bk.asarray(self.w)
 
     @property
     def n_views(self) -> int:
@@ -114,19 +133,23 @@ class ViewModel:
         """
         out = copy.copy(self)
         out.z_um = self.z_um[sl]
-        out.a = np.ascontiguousarray(self.a[:, :, sl])
+        out.a = self.bk.xp.ascontiguousarray(self.a[:, :, sl])
         return out
 
     def full_spectra(self, contrast) -> np.ndarray:
-        """Weighted contrast spectra, (K, ny, nx//2+1) complex64 (unitary real FFT).
+        """Weighted contrast spectra, (K, ny, nx//2+1) complex64 (unitary real FFT), on the device.
 
         Parameters
         ----------
-        contrast : ndarray, shape (K, ny, nx)
+        contrast : ndarray (host or device), shape (K, ny, nx)
             I_k / I0_k − 1 of each view.
+
+        Returns
+        -------
+        ndarray, complex64, (K, ny, nx//2+1)
         """
-        c = np.asarray(contrast, np.float32) * self.w[:, None, None]
-        return sfft.rfft2(c, norm="ortho", workers=-1)
+        c = self.bk.asarray(contrast, np.float32) * self._w[:, None, None]
+        return self.bk.rfft2(c, norm="ortho")
 
     def spectra(self, contrast) -> np.ndarray:
         """:meth:`full_spectra` on the band, (P, K).
@@ -153,7 +176,7 @@ class ViewModel:
         -------
         ndarray, complex, (P, n)
         """
-        band = self.band.take(spec)
+        band = self.band.take(spec, self.bk.xp)
         return band.reshape(band.shape[0], -1).T
 
     def put(self, values, lead: int, dtype=np.complex64) -> np.ndarray:
@@ -170,7 +193,7 @@ class ViewModel:
         -------
         ndarray, (n, ny, nx//2+1)
         """
-        out = np.zeros((lead, self.shape[0], self.shape[1] // 2 + 1), dtype)
+        out = self.bk.xp.zeros((lead, self.shape[0], self.shape[1] // 2 + 1), dtype)
         self.band.put(out, values.T.reshape((lead,) + self.band.box_shape))
         return out
 
@@ -186,7 +209,7 @@ class ViewModel:
         ndarray, float32, (n, ny, nx)
         """
         spec = self.put(values, values.shape[1])
-        return sfft.irfft2(spec, s=self.shape, norm="ortho", workers=-1).astype(np.float32)
+        return self.bk.irfft2(spec, s=self.shape, norm="ortho").astype(np.float32)
 
     def forward(self, phi_band) -> np.ndarray:
         """A φ̂ per band frequency: (P, Z) -> (P, K).
@@ -209,11 +232,11 @@ def apply(m, x) -> np.ndarray:
 
     Parameters
     ----------
-    m : ndarray, (P, M, N)
-    x : ndarray, (P, N)
+    m : ndarray (NumPy or CuPy), (P, M, N)
+    x : ndarray (same module), (P, N)
 
     Returns
     -------
     ndarray, (P, M)
     """
-    return np.matmul(m, x[:, :, None])[:, :, 0]
+    return (m @ x[:, :, None])[:, :, 0]

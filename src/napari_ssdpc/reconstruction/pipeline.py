@@ -163,7 +163,7 @@ class Reconstructor:
         device=None,
     ):
         rec = (settings or ReconstructionSettings()).to_dict()
-        self.backend = get_backend(device or rec["device"])  # 'cpu' (NumPy) or 'gpu' (CuPy): where RL runs
+        self.backend = get_backend(device or rec["device"])  # 'cpu' (NumPy) or 'gpu' (CuPy): RL, wotf, tv
         self.optics = optics
         self.calibration = calibration
         z_min, z_max = (rec["z_min_um"], rec["z_max_um"]) if z is None else z
@@ -256,7 +256,14 @@ class Reconstructor:
         r_z = float(design(self.optics)["r_z_ffl_um"])
         zs, planes = padded_planes(self.z_um, r_z) if self.method == "tv" else (self.z_um, slice(None))
         model = ViewModel(
-            self.optics, self.lenslets, self.mask.shape, self.pixel_um, zs, i0=self.level[self.lit], progress=progress
+            self.optics,
+            self.lenslets,
+            self.mask.shape,
+            self.pixel_um,
+            zs,
+            i0=self.level[self.lit],
+            progress=progress,
+            backend=self.backend,
         )
         self.wotf = WotfInversion(model.planes(planes), self.alpha)
         if self.method == "tv":

@@ -22,7 +22,9 @@ z₂ = φ (the constraints). The φ-step is solved exactly: in the 3D Fourier do
 diagonal and the data term is K x Z per lateral frequency, so with the Woodbury identity every
 frequency costs one K x K product (the inverses are built once, like the Tikhonov operators).
 Because φ is real, everything runs on the half spectrum of a real 3D FFT, and the products are
-batched over the band's frequencies (``np.matmul`` on contiguous (P, K, Z) arrays).
+batched over the band's frequencies (``@`` on contiguous (P, K, Z) arrays). Every array lives on
+the model's device (:mod:`.backend`: NumPy on the CPU, CuPy on a GPU); only the views come in and
+the phase goes out.
 
 The z grid is padded by about one axial resolution length on each side (:func:`padded_planes`).
 
@@ -125,10 +127,13 @@ class TvInversion:
         self.voxel = (self.dz, model.pixel_um, model.pixel_um)
         self.sparsity_um = SPARSITY_PER_RZ * float(r_z_um)
         self.mask = np.ones(self.shape, bool) if mask is None else np.asarray(mask, bool)
+        self.bk = bk = model.bk
+        self.xp = xp = bk.xp
+        self._mask = bk.asarray(self.mask)
         # the model on the z frequencies of a unitary DFT along z: Â(kz) = ifft_z(A)
-        self.ah = sfft.ifft(model.a, axis=2, norm="ortho", workers=-1).astype(np.complex64)  # (P, K, Z)
-        self.ah_h = np.ascontiguousarray(np.conj(self.ah).transpose(0, 2, 1))  # (P, Z, K)
-        self.data_scale = float(np.max(np.sum(np.abs(model.a) ** 2, axis=(1, 2)))) / nz
+        self.ah = bk.ifft(model.a, axis=2, norm="ortho").astype(np.complex64)  # (P, K, Z)
+        self.ah_h = xp.ascontiguousarray(xp.conj(self.ah).transpose(0, 2, 1))  # (P, Z, K)
+        self.data_scale = float(xp.max(xp.sum(xp.abs(model.a) ** 2, axis=(1, 2)))) / nz
         self.rho = RHO_PER_DATA * self.data_scale
         # eigenvalues of DᴴD (forward differences per µm, periodic) on the half spectrum
         ny, nx = self.shape
@@ -136,15 +141,16 @@ class TvInversion:
         dyy = (2 * np.sin(np.pi * sfft.fftfreq(ny))) ** 2 / self.voxel[1] ** 2
         dxx = (2 * np.sin(np.pi * np.arange(nx // 2 + 1) / nx)) ** 2 / self.voxel[2] ** 2
         dtd = dzz[:, None, None] + dyy[None, :, None] + dxx[None, None, :]
-        self.b = (self.rho * (1.0 + dtd)).astype(np.float32)  # (kz, ny, nx//2+1)
-        self.binv_band = np.ascontiguousarray(1.0 / model.take(self.b))  # (P, kz)
+        self.b = bk.asarray((self.rho * (1.0 + dtd)).astype(np.float32))  # (kz, ny, nx//2+1)
+        self.binv_band = xp.ascontiguousarray(1.0 / model.take(self.b))  # (P, kz)
         # per band frequency G⁻¹ = (I + Â b⁻¹ Âᴴ)⁻¹ (K x K), for the Woodbury identity
-        g = np.matmul(self.ah * self.binv_band[:, None, :], self.ah_h)
-        g += np.eye(model.n_views, dtype=g.dtype)
-        self.ginv = np.linalg.inv(g).astype(np.complex64)
-        outside = np.ones(self.b.shape[1:], bool)
+        g = (self.ah * self.binv_band[:, None, :]) @ self.ah_h
+        g += xp.eye(model.n_views, dtype=g.dtype)
+        self.ginv = xp.linalg.inv(g).astype(np.complex64)
+        outside = np.ones(dtd.shape[1:], bool)
         model.band.put(outside, np.zeros(model.band.box_shape, bool))
-        self._outside = outside
+        self._n_outside = int(outside.sum())
+        self._outside = bk.asarray(outside)
 
     # ------------------------------------------------------------------ pieces
     def noise(self, contrast) -> float:
@@ -164,17 +170,17 @@ class TvInversion:
         return self._noise(self.model.full_spectra(contrast))
 
     def _noise(self, spec) -> float:
-        if self._outside.sum() < 8:
+        if self._n_outside < 8:
             return float("nan")
-        power = np.abs(spec[:, self._outside]) ** 2
+        power = self.xp.abs(spec[:, self._outside]) ** 2
         frac = float(self.mask.mean())  # noise lives only inside the field stop
-        return float(np.sqrt(np.median(power) / math.log(2) / max(frac, 1e-6)))
+        return math.sqrt(float(self.xp.median(power)) / math.log(2) / max(frac, 1e-6))
 
     def _fft(self, phi):
-        return sfft.rfftn(phi, norm="ortho", workers=-1)
+        return self.bk.rfftn(phi, norm="ortho")
 
     def _ifft(self, phi_hat):
-        return sfft.irfftn(phi_hat, s=(self.nz,) + self.shape, norm="ortho", workers=-1)
+        return self.bk.irfftn(phi_hat, s=(self.nz,) + self.shape, norm="ortho")
 
     def _solve(self, rhs_hat):
         """(ÂᴴÂ + b)⁻¹ r̂ by Woodbury, r̂/b − b⁻¹Âᴴ G⁻¹ Â (r̂/b), and Â of the solution.
@@ -191,26 +197,28 @@ class TvInversion:
 
     def _data(self, fwd, band) -> float:
         """‖Âφ̂ − ĉ‖² over the whole spectrum, from the half band."""
-        return float(np.sum(self.model.multiplicity[:, None] * np.abs(fwd - band) ** 2))
+        return float(self.xp.sum(self.model.multiplicity[:, None] * abs(fwd - band) ** 2))
 
     def _grad(self, phi, out=None):
         """Forward differences per µm (periodic): (3, Z, ny, nx)."""
-        out = np.empty((3,) + phi.shape, np.float32) if out is None else out
+        xp = self.xp
+        out = xp.empty((3,) + phi.shape, np.float32) if out is None else out
         for a, h in enumerate(self.voxel):
-            p, g = np.moveaxis(phi, a, 0), np.moveaxis(out[a], a, 0)
-            np.subtract(p[1:], p[:-1], out=g[:-1])
-            np.subtract(p[:1], p[-1:], out=g[-1:])
+            p, g = xp.moveaxis(phi, a, 0), xp.moveaxis(out[a], a, 0)
+            xp.subtract(p[1:], p[:-1], out=g[:-1])
+            xp.subtract(p[:1], p[-1:], out=g[-1:])
             g *= np.float32(1 / h)
         return out
 
     def _grad_adj(self, g):
         """Dᴴ of :meth:`_grad`: Σ_a (g_a[i−1] − g_a[i]) / h_a."""
-        out = np.zeros(g.shape[1:], np.float32)
-        tmp = np.empty_like(out)
+        xp = self.xp
+        out = xp.zeros(g.shape[1:], np.float32)
+        tmp = xp.empty_like(out)
         for a, h in enumerate(self.voxel):
-            ga, t = np.moveaxis(g[a], a, 0), np.moveaxis(tmp, a, 0)
-            np.subtract(ga[:-1], ga[1:], out=t[1:])
-            np.subtract(ga[-1:], ga[:1], out=t[:1])
+            ga, t = xp.moveaxis(g[a], a, 0), xp.moveaxis(tmp, a, 0)
+            xp.subtract(ga[:-1], ga[1:], out=t[1:])
+            xp.subtract(ga[-1:], ga[:1], out=t[:1])
             t *= np.float32(1 / h)
             out += tmp
         return out
@@ -258,7 +266,8 @@ class TvInversion:
 
         Returns
         -------
-        phi : ndarray, float32, shape (Z, ny, nx)
+        phi : numpy.ndarray, float32, shape (Z, ny, nx)
+            On the host, whatever the model's device.
         report : TvReport
         """
         if sign not in SIGNS:
@@ -274,21 +283,22 @@ class TvInversion:
         lam_abs = LAMBDA_PER_NOISE * scale * (1.0 if lam is None else float(lam))
         report.lam = lam_abs
         cell = float(np.prod(self.voxel))
-        # the variables live on the padded grid
-        phi = np.zeros((self.nz,) + self.shape, np.float32)
+        # the variables live on the padded grid, on the device
+        xp = self.xp
+        phi = xp.zeros((self.nz,) + self.shape, np.float32)
         if warm is not None:
-            phi[self.planes] = warm
+            phi[self.planes] = self.bk.asarray(warm, np.float32)
         z1 = self._grad(phi)
-        u1 = np.zeros_like(z1)
+        u1 = xp.zeros_like(z1)
         z2 = self._project(phi, sign, phi_max)
-        u2 = np.zeros_like(phi)
-        g = np.empty_like(z1)
+        u2 = xp.zeros_like(phi)
+        g = xp.empty_like(z1)
         thresh = np.float32(lam_abs / self.rho * cell)
         l1 = thresh / np.float32(self.sparsity_um)  # μ = λ / ℓ: the medium is Δn = 0 where the data need nothing
         for it in range(iterations):
             if should_stop is not None and should_stop():
                 break
-            np.subtract(z1, u1, out=g)
+            xp.subtract(z1, u1, out=g)
             r = self._grad_adj(g)
             r += z2
             r -= u2
@@ -297,14 +307,14 @@ class TvInversion:
             rhs += rhs0
             phi_hat, fwd = self._solve(rhs)
             new = self._ifft(phi_hat)
-            change = float(np.linalg.norm(new - phi)) / max(float(np.linalg.norm(new)), 1e-12)
+            change = float(xp.linalg.norm(new - phi)) / max(float(xp.linalg.norm(new)), 1e-12)
             phi = new
             self._grad(phi, out=g)
-            tv = sum(in_threads(lambda sl: _update_gradients(g[:, sl], z1[:, sl], u1[:, sl], thresh), self.nz))
-            penalty = lam_abs * (tv + float(np.abs(phi).sum()) / self.sparsity_um)
+            tv = self._update_gradients(g, z1, u1, thresh)
+            penalty = lam_abs * (tv + float(abs(phi).sum()) / self.sparsity_um)
             report.objective.append(0.5 * self._data(fwd, band) + penalty * cell)
             w = RELAX * phi + (1 - RELAX) * z2
-            z2 = self._project(_shrink(w + u2, l1), sign, phi_max)
+            z2 = self._project(_shrink(xp, w + u2, l1), sign, phi_max)
             u2 += w
             u2 -= z2
             report.relative_change.append(change)
@@ -329,7 +339,7 @@ class TvInversion:
                 SsdpcWarning,
                 stacklevel=2,
             )
-        return out[self.planes], report
+        return self.bk.to_host(out[self.planes]), report
 
     def _auto_sign(self, contrast, warm, phi_max, lam, iterations, tol, progress, should_stop):
         """The sign the data support: a short solve with each, the lower objective wins."""
@@ -359,25 +369,31 @@ class TvInversion:
     def _project(self, phi, sign, phi_max):
         lo = 0.0 if sign == "denser" else -phi_max
         hi = 0.0 if sign == "lighter" else phi_max
-        return np.clip(phi, lo, hi) * self.mask
+        return self.xp.clip(phi, lo, hi) * self._mask
+
+    def _update_gradients(self, g, z1, u1, thresh) -> float:
+        """Over-relaxed ADMM step of the gradient split (Boyd et al. 2011, §3.4.3), in place:
+        v = αDφ + (1 − α)z₁ + u₁, z₁ = shrink(v, t) and u₁ = v − z₁ = clip(v, ±t). Returns Σ|Dφ|.
+
+        ``g`` holds Dφ on entry and is overwritten. On the CPU the planes are cut into one part per
+        core (NumPy releases the GIL); a GPU takes the whole volume at once.
+        """
+        xp = self.xp
+
+        def part(sl):
+            gp, zp, up = g[:, sl], z1[:, sl], u1[:, sl]
+            tv = float(abs(gp).sum())
+            gp *= np.float32(RELAX)
+            zp *= np.float32(1 - RELAX)
+            gp += zp
+            gp += up
+            xp.clip(gp, -thresh, thresh, out=up)
+            xp.subtract(gp, up, out=zp)
+            return tv
+
+        return part(slice(None)) if self.bk.is_gpu else sum(in_threads(part, self.nz))
 
 
-def _update_gradients(g, z1, u1, thresh) -> float:
-    """Over-relaxed ADMM step of the gradient split (Boyd et al. 2011, §3.4.3), in place:
-    v = αDφ + (1 − α)z₁ + u₁, z₁ = shrink(v, t) and u₁ = v − z₁ = clip(v, ±t). Returns Σ|Dφ|.
-
-    ``g`` holds Dφ on entry and is overwritten; the arrays may be views of a part of the volume.
-    """
-    tv = float(np.abs(g).sum())
-    g *= np.float32(RELAX)
-    z1 *= np.float32(1 - RELAX)
-    g += z1
-    g += u1
-    np.clip(g, -thresh, thresh, out=u1)
-    np.subtract(g, u1, out=z1)
-    return tv
-
-
-def _shrink(v, t):
-    """Soft threshold: the proximal step of t‖·‖₁."""
-    return v - np.clip(v, -t, t)
+def _shrink(xp, v, t):
+    """Soft threshold: the proximal step of t‖·‖₁ (``xp``: NumPy or CuPy)."""
+    return v - xp.clip(v, -t, t)

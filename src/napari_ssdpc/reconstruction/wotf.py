@@ -36,15 +36,16 @@ class WotfInversion:
         if not alpha > 0:
             raise SsdpcError(f"alpha must be > 0, got {alpha}")
         self.model = model
+        xp = model.bk.xp  # NumPy or CuPy: the model's device
         a = model.a
-        a_h = np.conj(a).transpose(0, 2, 1)  # (P, Z, K)
-        gram = np.matmul(a, a_h)  # (P, K, K)
+        a_h = xp.ascontiguousarray(xp.conj(a).transpose(0, 2, 1))  # (P, Z, K)
+        gram = a @ a_h  # (P, K, K)
         k = model.n_views
-        scale = float(np.max(np.real(np.trace(gram, axis1=1, axis2=2)))) / k
+        scale = float(xp.max(xp.real(xp.trace(gram, axis1=1, axis2=2)))) / k
         self.alpha = float(alpha)
         self.alpha_abs = self.alpha * scale
-        inv = np.linalg.inv(gram + self.alpha_abs * np.eye(k, dtype=np.complex64))
-        self.inverse = np.matmul(a_h, inv).astype(np.complex64)  # (P, Z, K)
+        inv = xp.linalg.inv(gram + self.alpha_abs * xp.eye(k, dtype=np.complex64))
+        self.inverse = (a_h @ inv).astype(np.complex64)  # (P, Z, K)
 
     def phase(self, contrast) -> np.ndarray:
         """Phase per slab, (Z, ny, nx) float32 rad, from the views' contrast (K, ny, nx).
@@ -55,7 +56,8 @@ class WotfInversion:
 
         Returns
         -------
-        ndarray, float32, (Z, ny, nx)
+        numpy.ndarray, float32, (Z, ny, nx)
+            On the host, whatever the model's device.
         """
         spec = self.model.spectra(contrast)  # (P, K)
-        return self.model.images(apply(self.inverse, spec))
+        return self.model.bk.to_host(self.model.images(apply(self.inverse, spec)))
