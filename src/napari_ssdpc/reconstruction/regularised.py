@@ -313,10 +313,7 @@ class TvInversion:
             tv = self._update_gradients(g, z1, u1, thresh)
             penalty = lam_abs * (tv + float(abs(phi).sum()) / self.sparsity_um)
             report.objective.append(0.5 * self._data(fwd, band) + penalty * cell)
-            w = RELAX * phi + (1 - RELAX) * z2
-            z2 = self._project(_shrink(xp, w + u2, l1), sign, phi_max)
-            u2 += w
-            u2 -= z2
+            self._update_constraints(phi, z2, u2, l1, _bounds(sign, phi_max), scratch=g[0])
             report.relative_change.append(change)
             report.iterations = it + 1
             if progress is not None:
@@ -367,16 +364,39 @@ class TvInversion:
         return phi, report
 
     def _project(self, phi, sign, phi_max):
-        lo = 0.0 if sign == "denser" else -phi_max
-        hi = 0.0 if sign == "lighter" else phi_max
-        return self.xp.clip(phi, lo, hi) * self._mask
+        return self.xp.clip(phi, *_bounds(sign, phi_max)) * self._mask
+
+    def _parts(self, part) -> float:
+        """Σ ``part(planes)``: one part per core on the CPU (NumPy releases the GIL), the whole
+        volume at once on a GPU."""
+        return part(slice(None)) if self.bk.is_gpu else sum(in_threads(part, self.nz))
+
+    def _update_constraints(self, phi, z2, u2, l1, bounds, scratch) -> None:
+        """Over-relaxed ADMM step of the constraint split, in place: v = αφ + (1 − α)z₂ + u₂,
+        z₂ = P_C(shrink(v, μ)) (the sparsity prox, then the sign, bound and field stop) and
+        u₂ = v − z₂. ``scratch`` (the shape of φ) is overwritten."""
+        xp, mask = self.xp, self._mask
+
+        def part(sl):
+            z, u, s = z2[sl], u2[sl], scratch[sl]
+            z *= np.float32(1 - RELAX)
+            u += z
+            xp.multiply(phi[sl], np.float32(RELAX), out=s)
+            u += s  # u holds v
+            xp.clip(u, -l1, l1, out=z)
+            xp.subtract(u, z, out=z)  # shrink(v, μ)
+            xp.clip(z, *bounds, out=z)
+            z *= mask
+            u -= z
+            return 0.0
+
+        self._parts(part)
 
     def _update_gradients(self, g, z1, u1, thresh) -> float:
         """Over-relaxed ADMM step of the gradient split (Boyd et al. 2011, §3.4.3), in place:
         v = αDφ + (1 − α)z₁ + u₁, z₁ = shrink(v, t) and u₁ = v − z₁ = clip(v, ±t). Returns Σ|Dφ|.
 
-        ``g`` holds Dφ on entry and is overwritten. On the CPU the planes are cut into one part per
-        core (NumPy releases the GIL); a GPU takes the whole volume at once.
+        ``g`` holds Dφ on entry and is overwritten.
         """
         xp = self.xp
 
@@ -391,9 +411,9 @@ class TvInversion:
             xp.subtract(gp, up, out=zp)
             return tv
 
-        return part(slice(None)) if self.bk.is_gpu else sum(in_threads(part, self.nz))
+        return self._parts(part)
 
 
-def _shrink(xp, v, t):
-    """Soft threshold: the proximal step of t‖·‖₁ (``xp``: NumPy or CuPy)."""
-    return v - xp.clip(v, -t, t)
+def _bounds(sign, phi_max) -> tuple[float, float]:
+    """(lo, hi) of φ for a sign constraint and a bound |φ| ≤ φ_max."""
+    return (0.0 if sign == "denser" else -phi_max, 0.0 if sign == "lighter" else phi_max)
