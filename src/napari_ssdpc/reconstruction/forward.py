@@ -22,8 +22,10 @@ noisier (shot noise), so the weighted contrast has the same noise in every view.
 from __future__ import annotations
 
 import copy
+import math
 
 import numpy as np
+import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics import transfer
@@ -31,7 +33,7 @@ from napari_ssdpc.reconstruction.backend import Backend, get_backend
 from napari_ssdpc.reconstruction.deconvolution import Band
 from napari_ssdpc.settings.optics import Optics
 
-__all__ = ["ViewModel", "apply"]
+__all__ = ["ViewModel", "apply", "padded_planes"]
 
 
 class ViewModel:
@@ -240,3 +242,36 @@ def apply(m, x) -> np.ndarray:
     ndarray, (P, M)
     """
     return (m @ x[:, :, None])[:, :, 0]
+
+
+def padded_planes(z_um, r_z_um: float, pad_um: float | None = None) -> tuple[np.ndarray, slice]:
+    """The z grid the TV solve runs on: ``z_um`` padded beyond each end, to a fast FFT length.
+
+    A padding plane may hold what the views see of objects beyond the requested range (it is
+    cropped from the output), so that those objects do not pile up in the end planes, and the
+    padding decouples the two ends, which the FFT along z would otherwise join.
+
+    Parameters
+    ----------
+    z_um : array_like, shape (Z,)
+        The requested slab centres, µm (evenly spaced).
+    r_z_um : float
+        Axial resolution, µm: the default padding on each side.
+    pad_um : float, optional
+        Padding on each side, µm (at least 4 planes).
+
+    Returns
+    -------
+    zs : ndarray, shape (Z + padding,)
+        The padded grid, µm.
+    planes : slice
+        Where ``z_um`` lies in ``zs``.
+    """
+    z_um = np.atleast_1d(np.asarray(z_um, float))
+    if len(z_um) < 2:
+        return z_um, slice(0, len(z_um))
+    dz = float(z_um[1] - z_um[0])
+    pad = max(4, int(math.ceil((r_z_um if pad_um is None else pad_um) / dz)))
+    nz = sfft.next_fast_len(len(z_um) + 2 * pad)  # the z FFTs run on every iteration
+    lo = (nz - len(z_um)) // 2
+    return z_um[0] + dz * (np.arange(nz) - lo), slice(lo, lo + len(z_um))

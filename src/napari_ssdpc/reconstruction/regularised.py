@@ -43,7 +43,7 @@ import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.reconstruction.backend import in_threads
-from napari_ssdpc.reconstruction.forward import ViewModel, apply
+from napari_ssdpc.reconstruction.forward import ViewModel, apply, padded_planes
 from napari_ssdpc.reconstruction.tv_report import TvReport
 
 __all__ = ["LAMBDA_PER_NOISE", "SIGNS", "TvInversion", "TvReport", "padded_planes"]
@@ -66,39 +66,6 @@ PROBE = 12
 LAMBDA_PER_NOISE = 1.0
 #: ADMM penalty ρ relative to the strongest lateral frequency's data weight Σ_k,z |A|²/Z.
 RHO_PER_DATA = 0.5
-
-
-def padded_planes(z_um, r_z_um: float, pad_um: float | None = None) -> tuple[np.ndarray, slice]:
-    """The z grid the TV solve runs on: ``z_um`` padded beyond each end, to a fast FFT length.
-
-    A padding plane may hold what the views see of objects beyond the requested range (it is
-    cropped from the output), so that those objects do not pile up in the end planes, and the
-    padding decouples the two ends, which the FFT along z would otherwise join.
-
-    Parameters
-    ----------
-    z_um : array_like, shape (Z,)
-        The requested slab centres, µm (evenly spaced).
-    r_z_um : float
-        Axial resolution, µm: the default padding on each side.
-    pad_um : float, optional
-        Padding on each side, µm (at least 4 planes).
-
-    Returns
-    -------
-    zs : ndarray, shape (Z + padding,)
-        The padded grid, µm.
-    planes : slice
-        Where ``z_um`` lies in ``zs``.
-    """
-    z_um = np.atleast_1d(np.asarray(z_um, float))
-    if len(z_um) < 2:
-        return z_um, slice(0, len(z_um))
-    dz = float(z_um[1] - z_um[0])
-    pad = max(4, int(math.ceil((r_z_um if pad_um is None else pad_um) / dz)))
-    nz = sfft.next_fast_len(len(z_um) + 2 * pad)  # the z FFTs run on every iteration
-    lo = (nz - len(z_um)) // 2
-    return z_um[0] + dz * (np.arange(nz) - lo), slice(lo, lo + len(z_um))
 
 
 class TvInversion:
