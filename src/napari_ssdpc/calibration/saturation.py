@@ -8,12 +8,16 @@ import numpy as np
 
 from napari_ssdpc.errors import SsdpcWarning
 
-__all__ = ["saturated_fraction", "warn_saturation"]
+__all__ = ["FULL_SCALE_CODES", "saturated_fraction", "warn_saturation"]
+
+#: The top code value of a b-bit camera (2**b - 1, b in 8..16), also in a wider container: a frame
+#: whose maximum is one of these may be clipped by the camera.
+FULL_SCALE_CODES = frozenset(2**b - 1 for b in range(8, 17))
 
 
 def saturated_fraction(frame, level=None) -> float:
     """Fraction of pixels at the top of the range: ``level``, else the full scale of an
-    integer frame (2**b − 1 for a b-bit camera in a 16-bit container, b in 8..16).
+    integer frame (one of :data:`FULL_SCALE_CODES`).
 
     Parameters
     ----------
@@ -31,10 +35,9 @@ def saturated_fraction(frame, level=None) -> float:
     if top is None:
         if a.dtype.kind not in "ui" or a.size == 0:
             return 0.0
-        m = int(a.max())
-        if m + 1 not in {2**b for b in range(8, 17)}:
+        top = int(a.max())
+        if top not in FULL_SCALE_CODES:
             return 0.0
-        top = m
     return float(np.mean(a >= top))
 
 

@@ -15,6 +15,7 @@ import os
 
 import numpy as np
 
+from napari_ssdpc.calibration.saturation import FULL_SCALE_CODES
 from napari_ssdpc.errors import SsdpcError
 
 __all__ = [
@@ -30,7 +31,6 @@ __all__ = [
 
 #: |Δn| beyond this is no biological or polymer sample in any medium: a wrong input or setting.
 MAX_DELTA_N = 0.5
-_FULL_SCALE = {2**b - 1 for b in range(8, 17)}
 
 
 def check_optics_match(optics, cal, source: str = "--optics") -> None:
@@ -156,7 +156,7 @@ def check_memory(optics, cal, settings, stacks: bool, available: int | None = No
 
 def _level_stats(img, cal, dark):
     """Per-lenslet median light above the dark level, and the noise of the dark pixels."""
-    from napari_ssdpc.calibration.calibrate import extract_views
+    from napari_ssdpc.calibration import extract_views
 
     views = extract_views(img - dark, cal)
     levels = np.array([np.median(v[views.mask]) for v in views.data])
@@ -174,7 +174,7 @@ def _constant(raw, img, name: str) -> None:
     lo, hi = float(img.min()), float(img.max())
     if hi > lo:
         return
-    if hi in _FULL_SCALE:
+    if hi in FULL_SCALE_CODES:
         raise SsdpcError(
             f"{name}: every pixel is {hi:g}, the top of the camera's range: the camera was saturated; "
             "shorten the exposure or dim the lamp and record it again"
