@@ -122,12 +122,14 @@ def design_warnings(optics: Optics) -> list[str]:
     ]
 
 
-def design_table(optics: Optics) -> str:
+def design_table(optics: Optics, short: bool = False) -> str:
     """Readable design summary for ``ssdpc design`` and the napari Optics step.
 
     Parameters
     ----------
     optics : Optics
+    short : bool
+        A few short lines (the napari Optics step) instead of the full table (``ssdpc design``).
 
     Returns
     -------
@@ -135,6 +137,8 @@ def design_table(optics: Optics) -> str:
         One row per quantity with its value and unit, then the design warnings.
     """
     d = design(optics)
+    if short:
+        return "\n".join([*_short_lines(d), *("⚠ " + w for w in design_warnings(optics))])
     rows = [
         ("Elemental-image magnification M_EI", f"{d['m_ei']:.4g}", "x"),
         ("Object pixel size", f"{d['object_pixel_um']:.4f}", "µm"),
@@ -171,3 +175,21 @@ def design_table(optics: Optics) -> str:
     lines.append("Note: the paper's measured axial resolution (21.96 µm) matches the f_fl variant of R_z.")
     lines += [f"Warning: {w}" for w in design_warnings(optics)]
     return "\n".join(lines)
+
+
+def _short_lines(d: dict) -> list[str]:
+    """The main design numbers of :func:`design`'s ``d`` in a few lines narrow enough for a dock."""
+    return [
+        f"FOV {d['fov_um']:.1f} µm · R_xy {d['r_xy_um']:.2f} µm",
+        f"R_z {d['r_z_ffl_um']:.2f} µm (tanθ = √2·d/f_fl: matches the",
+        f"    paper's measured 21.96 µm); {d['r_z_printed_um']:.2f} µm with Eq. 13 as printed",
+        f"DOF {d['dof_full_um']:.1f} µm full width (FWHM {d['dof_fwhm_um']:.1f} µm)",
+        f"usable depth {d['dof_um']:.1f} µm",
+        f"lenslets: {d['lenslets_in_pupil']} in the pupil, {d['lenslets_usable']} usable (≥ 50 % inside)",
+        f"source disk: {d['lenslets_inside']} inside, {d['lenslets_straddling']} straddling, "
+        f"{d['lenslets_outside']} outside",
+        f"σ {d['sigma']:.2f} · M_EI {d['m_ei']:.3f} · object pixel {d['object_pixel_um']:.4f} µm",
+        f"pitch {d['pitch_px']:.2f} px · EI radius {d['ei_radius_px']:.2f} px",
+        f"expected axial FWHM {d['expected_axial_fwhm_um']:.1f} µm from the {d['lenslets_straddling']} "
+        "lenslets that straddle the source edge",
+    ]

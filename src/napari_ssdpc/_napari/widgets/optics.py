@@ -9,81 +9,70 @@ from magicgui.widgets import CheckBox, FileEdit, FloatSpinBox, Label, LineEdit, 
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.widgets.common import StepWidget, catching_warnings, wrap
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.physics.design import design, design_warnings
+from napari_ssdpc.physics.design import design_table
+from napari_ssdpc.settings.base import field_range
 from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.settings.parts import PART_KEYS
 
-__all__ = ["OPTICS_FIELDS", "OpticsWidget", "design_text"]
+__all__ = ["OPTICS_FIELDS", "OpticsWidget", "optics_field"]
 
-# attribute, label, tooltip, (min, max, step) or "int"/"bool"
+# flat attribute (as Optics.replace takes it), label, spin-box step (None: a whole number or a switch);
+# the range, the tooltip and the value that stands for "not set" come from the settings model
 OPTICS_FIELDS = [
-    (
-        "wavelength_um",
-        "wavelength (µm)",
-        "vacuum wavelength of the illumination, µm (520 nm = 0.52)",
-        (0.2, 2.0, 0.001),
-    ),
-    (
-        "medium_index",
-        "medium index",
-        "refractive index of the immersion / embedding medium (no unit)",
-        (1.0, 2.5, 0.001),
-    ),
-    (
-        "condenser_na",
-        "condenser NA",
-        "illumination NA (no unit); must stay below the objective NA (σ < 1) for phase contrast",
-        (0.0, 1.6, 0.01),
-    ),
-    ("magnification", "objective M", "objective magnification (×)", (1.0, 200.0, 1.0)),
-    ("na", "objective NA", "objective numerical aperture (no unit)", (0.01, 1.7, 0.01)),
-    ("tube_lens_mm", "tube lens (mm)", "focal length of the tube lens, mm", (20.0, 1000.0, 1.0)),
-    ("fourier_lens_mm", "Fourier lens (mm)", "focal length of the Fourier lens f_fl, mm", (5.0, 2000.0, 0.5)),
-    ("pitch_um", "MLA pitch (µm)", "microlens pitch, µm", (10.0, 10000.0, 1.0)),
-    ("mla_focal_length_mm", "MLA focal length (mm)", "microlens focal length f_ml, mm", (0.1, 500.0, 0.1)),
-    ("lenslet_radius_um", "lenslet radius (µm)", "clear radius of one microlens, µm", (5.0, 10000.0, 1.0)),
-    ("pixel_um", "camera pixel (µm)", "camera pixel size, µm", (0.5, 50.0, 0.01)),
-    ("width_px", "sensor width (px)", "sensor width, pixels", "int"),
-    ("height_px", "sensor height (px)", "sensor height, pixels", "int"),
-    (
-        "iris_radius_um",
-        "iris radius (µm)",
-        "field-iris radius at the native image plane, µm; 0 = EIs tangent (paper Eq. 9)",
-        (0.0, 100000.0, 1.0),
-    ),
-    ("flip_x", "camera flipped in x", "the camera image is mirrored left-right", "bool"),
-    ("flip_y", "camera flipped in y", "the camera image is mirrored up-down", "bool"),
+    ("wavelength_um", "wavelength (µm)", 0.001),
+    ("medium_index", "medium index", 0.001),
+    ("condenser_na", "condenser NA", 0.01),
+    ("magnification", "objective M", 1.0),
+    ("na", "objective NA", 0.01),
+    ("tube_lens_mm", "tube lens (mm)", 1.0),
+    ("fourier_lens_mm", "Fourier lens (mm)", 0.5),
+    ("pitch_um", "MLA pitch (µm)", 1.0),
+    ("mla_focal_length_mm", "MLA focal length (mm)", 0.1),
+    ("lenslet_radius_um", "lenslet radius (µm)", 1.0),
+    ("pixel_um", "camera pixel (µm)", 0.01),
+    ("width_px", "sensor width (px)", None),
+    ("height_px", "sensor height (px)", None),
+    ("iris_radius_um", "iris radius (µm)", 1.0),
+    ("flip_x", "camera flipped in x", None),
+    ("flip_y", "camera flipped in y", None),
 ]
 
 
-def design_text(optics: Optics) -> str:
-    """The design numbers (paper Eqs. 8-14), a few short lines.
+def optics_field(attr: str):
+    """The settings field behind a flat :class:`Optics` attribute, and its inclusive range.
 
     Parameters
     ----------
-    optics : Optics
+    attr : str
+        A flat attribute, e.g. ``"na"`` (in ``objective``) or ``"mla_focal_length_mm"``.
 
     Returns
     -------
-    str
+    info : pydantic.fields.FieldInfo
+        The field (its annotation, description and default).
+    lo, hi : float
+        Its range (``settings.base.field_range``); ±inf where it has none.
     """
-    d = design(optics)
-    return "\n".join(
-        [
-            f"FOV {d['fov_um']:.1f} µm · R_xy {d['r_xy_um']:.2f} µm",
-            f"R_z {d['r_z_ffl_um']:.2f} µm (tanθ = √2·d/f_fl: matches the",
-            f"    paper's measured 21.96 µm); {d['r_z_printed_um']:.2f} µm with Eq. 13 as printed",
-            f"DOF {d['dof_full_um']:.1f} µm full width (FWHM {d['dof_fwhm_um']:.1f} µm)",
-            f"usable depth {d['dof_um']:.1f} µm",
-            f"lenslets: {d['lenslets_in_pupil']} in the pupil, {d['lenslets_usable']} usable (≥ 50 % inside)",
-            f"source disk: {d['lenslets_inside']} inside, {d['lenslets_straddling']} straddling, "
-            f"{d['lenslets_outside']} outside",
-            f"σ {d['sigma']:.2f} · M_EI {d['m_ei']:.3f} · object pixel {d['object_pixel_um']:.4f} µm",
-            f"pitch {d['pitch_px']:.2f} px · EI radius {d['ei_radius_px']:.2f} px",
-            f"expected axial FWHM {d['expected_axial_fwhm_um']:.1f} µm from the {d['lenslets_straddling']} "
-            "lenslets that straddle the source edge",
-            *("⚠ " + w for w in design_warnings(optics)),
-        ]
-    )
+    model, name = Optics, attr
+    if attr in PART_KEYS:
+        part, name = PART_KEYS[attr]
+        model = Optics.model_fields[part].annotation
+    lo, hi = field_range(model, name)
+    return model.model_fields[name], lo, hi
+
+
+def _field_widget(attr: str, label: str, step):
+    """A spin box or check box with the field's range and description; an optional number shows
+    its "not set" value (the model's default, None) as 0."""
+    info, lo, hi = optics_field(attr)
+    tip = info.description
+    if info.annotation is bool:
+        return CheckBox(text=label, tooltip=tip)
+    if info.annotation is int:
+        return SpinBox(label=label, tooltip=tip, min=int(lo), max=int(hi), step=1)
+    if info.is_required():
+        return FloatSpinBox(label=label, tooltip=tip, min=lo, max=hi, step=step)
+    return FloatSpinBox(label=label, tooltip=f"{tip}; 0 = not set, else {lo:g} to {hi:g}", min=0.0, max=hi, step=step)
 
 
 class OpticsWidget(StepWidget):
@@ -91,15 +80,7 @@ class OpticsWidget(StepWidget):
 
     def __init__(self, napari_viewer):
         super().__init__(napari_viewer)
-        self.fields = {}
-        for attr, label, tip, spec in OPTICS_FIELDS:
-            if spec == "bool":
-                w = CheckBox(text=label, tooltip=tip)
-            elif spec == "int":
-                w = SpinBox(label=label, tooltip=tip, min=16, max=100000, step=1)
-            else:
-                w = FloatSpinBox(label=label, tooltip=tip, min=spec[0], max=spec[1], step=spec[2])
-            self.fields[attr] = w
+        self.fields = {attr: _field_widget(attr, label, step) for attr, label, step in OPTICS_FIELDS}
         self.name = LineEdit(label="name", tooltip="a name for this instrument (free text)")
         self.path = FileEdit(mode="r", filter="*.yaml *.yml")
         self.path.label = "optics YAML"
@@ -146,7 +127,7 @@ class OpticsWidget(StepWidget):
             self.name.value = optics.name
         finally:
             self._updating = False
-        self.design.value = design_text(optics)
+        self.design.value = design_table(optics, short=True)
 
     def values(self) -> dict:
         """The fields' values.
@@ -157,7 +138,10 @@ class OpticsWidget(StepWidget):
             Flat optics attributes (``Optics.replace`` keywords).
         """
         v = {attr: w.value for attr, w in self.fields.items()}
-        v["iris_radius_um"] = v["iris_radius_um"] or None
+        for attr in v:
+            info = optics_field(attr)[0]
+            if not info.is_required() and info.default is None and not v[attr]:
+                v[attr] = None  # 0 in the spin box: not set
         v["name"] = self.name.value
         return v
 
@@ -173,7 +157,7 @@ class OpticsWidget(StepWidget):
             self._last_error = str(e)
             return
         self._last_error = None
-        self.design.value = design_text(optics)
+        self.design.value = design_table(optics, short=True)
         self.session.set_optics(optics)
 
     def set_optics(self, optics: Optics):

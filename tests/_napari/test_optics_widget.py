@@ -1,0 +1,68 @@
+"""The Optics widget takes every range from the settings model, so the two never disagree."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from napari_ssdpc.physics.design import design_table
+from napari_ssdpc.settings.base import field_range
+from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.settings.parts import MLA, Objective, Sensor
+
+pytest.importorskip("napari")
+pytest.importorskip("pytestqt")
+
+from napari_ssdpc._napari import widgets as _widgets
+from napari_ssdpc._napari.widgets.optics import OPTICS_FIELDS, optics_field
+
+#: Where each flat attribute is defined, written out here so that the test does not use the
+#: lookup it checks.
+MODELS = {
+    **{k: (Optics, k) for k in ("wavelength_um", "medium_index", "condenser_na", "fourier_lens_mm")},
+    **{k: (Optics, k) for k in ("iris_radius_um", "flip_x", "flip_y")},
+    **{k: (Objective, k) for k in ("magnification", "na", "tube_lens_mm")},
+    "pitch_um": (MLA, "pitch_um"),
+    "mla_focal_length_mm": (MLA, "focal_length_mm"),
+    "lenslet_radius_um": (MLA, "lenslet_radius_um"),
+    **{k: (Sensor, k) for k in ("pixel_um", "width_px", "height_px")},
+}
+
+
+def test_every_optics_field_is_in_the_widget():
+    assert sorted(a for a, _, _ in OPTICS_FIELDS) == sorted(MODELS)
+
+
+@pytest.mark.parametrize("attr", sorted(MODELS))
+def test_optics_field_finds_the_models_range(attr):
+    model, name = MODELS[attr]
+    info, lo, hi = optics_field(attr)
+    assert info is model.model_fields[name]
+    assert (lo, hi) == field_range(model, name)
+
+
+def test_the_widgets_ranges_are_the_models(make_napari_viewer):
+    ow = _widgets.OpticsWidget(make_napari_viewer())
+    for attr, w in ow.fields.items():
+        model, name = MODELS[attr]
+        lo, hi = field_range(model, name)
+        if math.isinf(lo):  # a switch
+            assert isinstance(w.value, bool)
+            continue
+        info = model.model_fields[name]
+        assert w.max == hi, attr
+        # an optional number (the iris) shows "not set" as 0, below its range
+        assert w.min == (lo if info.is_required() else 0.0), attr
+    ow.fields["iris_radius_um"].value = 0.0
+    assert ow.values()["iris_radius_um"] is None
+    ow.fields["iris_radius_um"].value = 600.0
+    assert ow.values()["iris_radius_um"] == 600.0
+
+
+def test_the_widget_shows_the_short_design_table(make_napari_viewer):
+    ow = _widgets.OpticsWidget(make_napari_viewer())
+    optics = Optics.paper()
+    ow.set_optics(optics)
+    assert ow.design.value == design_table(optics, short=True)
+    assert "FOV 122.5 µm" in ow.design.value and "Field of view D_FOV (Eq. 10)" in design_table(optics)
