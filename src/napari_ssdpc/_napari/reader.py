@@ -15,6 +15,7 @@ import numpy as np
 
 from napari_ssdpc._napari.layers import is_map, result_layer
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.io.frames import TiffInfo, tiff_info
 from napari_ssdpc.reconstruction.outputs import QUANTITIES
 
 RESULT_FORMAT = "napari-ssdpc-result"
@@ -63,33 +64,19 @@ def get_raw_reader(path):
 
 
 def _is_raw_tiff(p: Path) -> bool:
-    import tifffile
-
-    with tifffile.TiffFile(p) as tif:
-        if _our_description(tif) is not None:  # a reconstruction: the result reader's job
-            return False
-        s = tif.series[0]
-        dims = [(a, n) for a, n in zip(s.axes, s.shape) if n > 1]
-        if any(a in "SC" for a, _ in dims):  # RGB or multi-channel: a foreign image
-            return False
-        if len(dims) not in (2, 3) or np.dtype(s.dtype).kind not in "uif":
-            return False
-        if min(n for _, n in dims[-2:]) < MIN_FRAME_PX:
-            return False
-        if len(dims) == 3 and dims[0][0] == "Z" and tif.is_ome and "PhysicalSizeZ" in (tif.ome_metadata or ""):
-            return False  # a calibrated z-stack: a volume, not a series
-        return _complete(tif, p.stat().st_size)
-
-
-def _complete(tif, size: int) -> bool:
-    """Whether the pixels of the first series' last page lie inside the file (a truncated copy
-    or an interrupted transfer ends early, and would fail only when that frame is shown)."""
-    pages = tif.series[0].pages
-    last = pages[len(pages) - 1] if len(pages) else None
-    if last is None:
+    info = tiff_info(p)
+    if _our_description(info) is not None:  # a reconstruction: the result reader's job
         return False
-    ends = [o + n for o, n in zip(last.dataoffsets, last.databytecounts)]
-    return bool(ends) and max(ends) <= size and all(n > 0 for n in last.databytecounts)
+    dims = [(a, n) for a, n in zip(info.axes, info.shape) if n > 1]
+    if any(a in "SC" for a, _ in dims):  # RGB or multi-channel: a foreign image
+        return False
+    if len(dims) not in (2, 3) or info.dtype.kind not in "uif":
+        return False
+    if min(n for _, n in dims[-2:]) < MIN_FRAME_PX:
+        return False
+    if len(dims) == 3 and dims[0][0] == "Z" and "PhysicalSizeZ" in (info.ome or {}).get("Pixels", {}):
+        return False  # a calibrated z-stack: a volume, not a series
+    return info.complete
 
 
 def open_lazy(path, squeeze: bool = True):
@@ -159,7 +146,7 @@ def get_calibration_reader(path):
     p = _path(path)
     if p is None or p.suffix.lower() != ".json" or not p.is_file() or p.stat().st_size > MAX_JSON_BYTES:
         return None
-    from napari_ssdpc.calibration.calibrate import CALIBRATION_FORMAT
+    from napari_ssdpc.calibration.result import CALIBRATION_FORMAT
 
     try:
         d = json.loads(p.read_text())
@@ -181,7 +168,7 @@ def read_calibration(path):
     -------
     list of layer data tuples
     """
-    from napari_ssdpc.calibration.calibrate import Calibration
+    from napari_ssdpc.calibration import Calibration
 
     p = Path(path)
     cal = Calibration.from_json(p)
@@ -294,10 +281,7 @@ def get_result_reader(path):
         if p.is_dir() and p.suffix.lower() == ".zarr":
             return read_result if zarr_images(p) else None
         if p.is_file() and p.suffix.lower() in (".tif", ".tiff"):
-            import tifffile
-
-            with tifffile.TiffFile(p) as tif:
-                return read_result if _our_description(tif) is not None else None
+            return read_result if _our_description(tiff_info(p)) is not None else None
     except Exception:  # unreadable or foreign: not ours
         return None
     return None
@@ -309,16 +293,12 @@ def _is_ours(d) -> bool:
     )
 
 
-def _our_description(tif):
+def _our_description(info: TiffInfo):
     """Our JSON description from an OME-TIFF's OME-XML, or None."""
-    if not tif.is_ome:
-        return None
-    import tifffile
-
+    desc = (info.ome or {}).get("Description")
     try:
-        desc = tifffile.xml2dict(tif.ome_metadata)["OME"]["Image"].get("Description")
         d = json.loads(desc) if isinstance(desc, str) else None
-    except (KeyError, TypeError, ValueError, AttributeError):
+    except ValueError:
         return None
     return d if _is_ours(d) else None
 
@@ -379,14 +359,10 @@ def read_result(path):
     p = Path(path)
     if p.is_dir():
         return _read_zarr(p)
-    import tifffile
-
-    with tifffile.TiffFile(p) as tif:
-        desc = _our_description(tif)
-        axes = tif.series[0].axes
-        pixels = tifffile.xml2dict(tif.ome_metadata)["OME"]["Image"]["Pixels"]
+    info = tiff_info(p)
+    desc, pixels = _our_description(info), (info.ome or {}).get("Pixels", {})
     data = open_lazy(p, squeeze=False)
-    axes = axes.replace("Q", "").replace("I", "T")
+    axes = info.axes.replace("Q", "").replace("I", "T")
     voxel = tuple(float(pixels.get(f"PhysicalSize{a}", 1.0)) for a in "ZYX")
     stem = _stem(p)
     hint = stem.rsplit("_", 1)[-1] if "_" in stem else ""

@@ -76,15 +76,13 @@ def _file_lock(path: Path) -> threading.Lock:
 
 def _cached(name: str, make, key: str = "") -> np.ndarray:
     """Read ``name`` from the cache, or make it and write it there (atomically)."""
-    import tifffile
-
-    from napari_ssdpc.io.frames import write_tiff
+    from napari_ssdpc.io.frames import read_frame, write_tiff
 
     path = cache_dir() / (f"{name}-{key}.tif" if key else f"{name}.tif")
     with _file_lock(path):
         for known in (SHIPPED / path.name, path):  # shipped with the package, else made here before
             if known.is_file():
-                return tifffile.imread(known)
+                return read_frame(known, allow_series=False, name="sample frame")
         data = make()
         write_tiff(path, data, photometric="minisblack")
     return data
@@ -161,11 +159,13 @@ def ship_bead_frames(folder: Path = SHIPPED) -> list[Path]:
     """
     import tifffile
 
+    from napari_ssdpc.io.frames import read_frame
+
     bead_frames()  # simulated into the cache if needed
     folder.mkdir(parents=True, exist_ok=True)
     out = []
     for made in sorted(cache_dir().glob("pmma_bead*.tif")):
-        frame = tifffile.imread(made)
+        frame = read_frame(made, name="sample frame")
         if frame.shape == (BEAD_ROI_PX, BEAD_ROI_PX):
             tifffile.imwrite(folder / made.name, frame, compression="zlib", photometric="minisblack")
             out.append(folder / made.name)

@@ -7,6 +7,7 @@ all, so an error never leaves a half-written file over a good one.
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -17,17 +18,110 @@ from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.files import atomic_write, atomic_write_set
 
 __all__ = [
+    "TiffInfo",
     "atomic_write",
     "create_ome_zarr",
     "link_root_image",
     "ngff_multiscales",
     "read_frame",
     "read_ome_zarr",
+    "tiff_info",
     "write_ome_tiff",
     "write_ome_tiffs",
     "write_tiff",
     "write_tiffs",
 ]
+
+
+@dataclass(frozen=True)
+class TiffInfo:
+    """What a TIFF says about itself: its first series' layout and its metadata, not its pixels.
+
+    Attributes
+    ----------
+    axes : str
+        The first series' axes as tifffile names them ("YX", "TYX", "IYX", "ZYX", "YXS", ...).
+    shape : tuple of int
+        The first series' shape, one entry per axis.
+    dtype : numpy.dtype
+    samples : int
+        Samples per pixel of the first page (3 or 4: a colour image).
+    description : str
+        The first page's ImageDescription (the OME-XML of an OME-TIFF).
+    software : str
+        The first page's Software tag.
+    ome : dict or None
+        The first OME ``Image`` element (``tifffile.xml2dict``; its ``Description`` and ``Pixels``)
+        of an OME-TIFF, else None.
+    complete : bool
+        The pixels of the first series' last page lie inside the file (a truncated copy or an
+        interrupted transfer ends early, and would fail only when that frame is read).
+    """
+
+    axes: str
+    shape: tuple
+    dtype: np.dtype
+    samples: int
+    description: str
+    software: str
+    ome: dict | None
+    complete: bool
+
+
+def tiff_info(path) -> TiffInfo:
+    """Open a TIFF and read what it says about itself (:class:`TiffInfo`), not its pixels.
+
+    Parameters
+    ----------
+    path : str or Path
+        The TIFF or OME-TIFF file.
+
+    Returns
+    -------
+    TiffInfo
+
+    Raises
+    ------
+    Exception
+        Whatever tifffile raises for a file that is not a TIFF it can parse (``OSError`` for one
+        that cannot be opened); the caller decides what that means.
+    """
+    path = Path(path)
+    with tifffile.TiffFile(path) as tif:
+        return _info(tif, path.stat().st_size)
+
+
+def _info(tif, size: int) -> TiffInfo:
+    """:class:`TiffInfo` of an open ``tifffile.TiffFile`` of ``size`` bytes."""
+    page = tif.pages[0]
+    series = tif.series[0] if tif.series else None
+    ome = None
+    if tif.is_ome:
+        try:
+            image = tifffile.xml2dict(tif.ome_metadata)["OME"]["Image"]
+            ome = image[0] if isinstance(image, list) else image
+        except (KeyError, TypeError, ValueError, AttributeError):
+            ome = None
+    return TiffInfo(
+        axes=series.axes if series is not None else "",
+        shape=tuple(series.shape) if series is not None else tuple(page.shape),
+        dtype=np.dtype(series.dtype if series is not None else page.dtype),
+        samples=int(getattr(page, "samplesperpixel", 1)),
+        description=str(getattr(page, "description", "") or ""),
+        software=str(getattr(page, "software", "") or ""),
+        ome=ome if isinstance(ome, dict) else None,
+        complete=series is not None and _complete(series, size),
+    )
+
+
+def _complete(series, size: int) -> bool:
+    """Whether the pixels of a series' last page lie inside a file of ``size`` bytes."""
+    pages = series.pages
+    last = pages[len(pages) - 1] if len(pages) else None
+    if last is None:
+        return False
+    ends = [o + n for o, n in zip(last.dataoffsets, last.databytecounts)]
+    return bool(ends) and max(ends) <= size and all(n > 0 for n in last.databytecounts)
 
 
 def read_frame(path, *, allow_series: bool = True, name: str = "frame") -> np.ndarray:
@@ -59,7 +153,7 @@ def read_frame(path, *, allow_series: bool = True, name: str = "frame") -> np.nd
         raise SsdpcError(f"file not found: {path} (check the path)")
     try:
         with tifffile.TiffFile(path) as tif:
-            _check_kind(tif, path, name)
+            _check_kind(_info(tif, path.stat().st_size), path, name)
             data = tif.asarray()
     except SsdpcError:
         raise
@@ -77,25 +171,24 @@ def read_frame(path, *, allow_series: bool = True, name: str = "frame") -> np.nd
     return data
 
 
-def _check_kind(tif, path: Path, name: str) -> None:
+def _check_kind(info: TiffInfo, path: Path, name: str) -> None:
     """Refuse colour images and ssdpc results given where a raw camera frame belongs."""
-    page = tif.pages[0]
-    series = tif.series[0] if tif.series else None
-    axes = series.axes if series is not None else ""
-    if int(getattr(page, "samplesperpixel", 1)) > 1 or "S" in axes:
+    if info.samples > 1 or "S" in info.axes:
         raise SsdpcError(
             f"{path}: a colour (RGB) image, not a raw camera frame; give the monochrome camera frame "
             "(export it as greyscale TIFF without colour conversion)"
         )
-    text = page.description or ""
+    text = info.description
     if "napari-ssdpc" in text and "quantity" in text:
         what = next((q for q in ("refractive index", "phase", "absorption", "DPC") if q in text), "a volume")
         raise SsdpcError(
             f"{path}: a reconstruction result ({what}) of `ssdpc reconstruct`, not a raw {name}; "
             "give the camera frame the result was computed from"
         )
-    if "Z" in axes:
-        raise SsdpcError(f"{path}: a z stack (axes {axes}), not a raw camera {name}; give the light-field frame (y, x)")
+    if "Z" in info.axes:
+        raise SsdpcError(
+            f"{path}: a z stack (axes {info.axes}), not a raw camera {name}; give the light-field frame (y, x)"
+        )
 
 
 def write_tiff(path, data, *, metadata=None, **kwargs) -> Path:

@@ -86,12 +86,10 @@ def is_ours(path: str | Path) -> bool:
         if path.suffix == ".json":
             return json.loads(path.read_text(encoding="utf-8")).get("format", "").startswith("napari-ssdpc")
         if path.name.endswith((".tif", ".tiff")):
-            import tifffile
+            from napari_ssdpc.io.frames import tiff_info
 
-            with tifffile.TiffFile(path) as tif:
-                page = tif.pages[0]
-                text = f"{getattr(page, 'description', '')} {getattr(page, 'software', '')}"
-            return "napari-ssdpc" in text
+            info = tiff_info(path)
+            return "napari-ssdpc" in f"{info.description} {info.software}"
         if path.suffix == ".png":  # our figures carry a Software text chunk
             from PIL import Image
 
