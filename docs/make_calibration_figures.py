@@ -21,9 +21,9 @@ from napari_ssdpc.calibration.overlay import overlay_png
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation import imperfect
-from napari_ssdpc.simulation import simulate as sim
 from napari_ssdpc.simulation.camera import Camera
 from napari_ssdpc.simulation.imaging import array_as_built
+from napari_ssdpc.simulation.sample_free import white_frame, white_intensity
 
 OUT = Path(__file__).resolve().parent / "images"
 
@@ -37,7 +37,7 @@ def worst_error(cal, centres, lenslets) -> float:
 def main():
     optics = Optics.paper()
     grid = Grid.nominal(optics, axis_offset_px=(30.3, -12.7), rotation_deg=2.3)
-    white = sim.white_frame(optics, grid=grid, rng=1)
+    white = white_frame(optics, grid=grid, rng=1)
     cal = calibrate(white, optics)
     overlay_png(white, cal, OUT / "calibration_overlay.png")
     _, _, truth, centres = array_as_built(optics, grid, None)
@@ -46,7 +46,7 @@ def main():
     array = imperfect.ArrayErrors(offset_frac=0.02, shear_deg=0.6, seed=4)
     camera = Camera(bit_depth=8, gain_adu_per_e=0.015, dark_offset_adu=10)
     grid, camera, truth, centres = array_as_built(optics, grid, camera, array)
-    intensity = sim.white_intensity(optics, grid, camera, array=array)
+    intensity = white_intensity(optics, grid, camera, array=array)
     r = optics.ei_radius_px
     intensity = imperfect.notch(intensity, centres, r)
     intensity = imperfect.content(intensity, centres, r, contrast=0.6)

@@ -22,13 +22,13 @@ def synthetic_series(tmp_path_factory):
     from napari_ssdpc.calibration.calibrate import calibrate
     from napari_ssdpc.physics.lattice import Grid
     from napari_ssdpc.settings.optics import Optics
-    from napari_ssdpc.simulation import simulate as sim
+    from napari_ssdpc.simulation.sample_free import flat_frame, white_frame
 
     optics = Optics.paper()
     grid = Grid.nominal(optics, axis_offset_px=(3.7, -2.2), rotation_deg=0.4)
     rng = np.random.default_rng(0)
-    white = sim.white_frame(optics, grid=grid, rng=rng)
-    flat = sim.flat_frame(optics, grid=grid, rng=rng)
+    white = white_frame(optics, grid=grid, rng=rng)
+    flat = flat_frame(optics, grid=grid, rng=rng)
     frames = []
     for _ in range(12):
         field = ndimage.zoom(rng.standard_normal((64, 77)), (2048 / 64, 2448 / 77), order=1)

@@ -15,7 +15,7 @@ from napari_ssdpc.calibration.calibrate import calibrate
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.frames import write_ome_tiff
 from napari_ssdpc.settings.optics import Optics
-from napari_ssdpc.simulation.simulate import white_frame
+from napari_ssdpc.simulation.sample_free import white_frame
 
 pytest.importorskip("napari")
 

@@ -26,8 +26,10 @@ from napari_ssdpc.calibration.calibrate import (
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.settings.optics import Optics
-from napari_ssdpc.simulation import simulate as sim
+from napari_ssdpc.simulation.multislice import Source
 from napari_ssdpc.simulation.phantoms import Box, Composite, pmma_bead
+from napari_ssdpc.simulation.sample_free import flat_frame, flat_intensity, white_frame, white_intensity
+from napari_ssdpc.simulation.simulate import simulate
 
 OPTICS = Optics.paper()
 P = OPTICS.pitch_px
@@ -72,7 +74,7 @@ def grid_errors(cal, truth):
 
 
 def check_white(grid, seed):
-    frame = sim.white_frame(OPTICS, grid=grid, rng=seed)
+    frame = white_frame(OPTICS, grid=grid, rng=seed)
     cal = calibrate(frame, OPTICS)
     axis, ei, pitch, rot = grid_errors(cal, grid)
     assert cal.kind == "white"
@@ -134,7 +136,7 @@ def test_white_frame_sweep():
 def test_flipped_camera_keeps_labels():
     optics = OPTICS.replace(flip_x=True)
     grid = Grid.nominal(optics, axis_offset_px=(25.0, -40.0), rotation_deg=-3.3)
-    cal = calibrate(sim.white_frame(optics, grid=grid, rng=4), optics)
+    cal = calibrate(white_frame(optics, grid=grid, rng=4), optics)
     tc = grid.lattice_px([ln.row for ln in cal.lenslets], [ln.col for ln in cal.lenslets])
     assert np.abs(tc - cal.centres_px).max() < EI_PX
     assert np.allclose(cal.grid.matrix, grid.matrix, atol=1e-3)
@@ -142,7 +144,7 @@ def test_flipped_camera_keeps_labels():
 
 # --------------------------------------------------------- flat and sample frames
 def check_flat(grid, seed):
-    frame = sim.flat_frame(OPTICS, grid=grid, rng=seed)
+    frame = flat_frame(OPTICS, grid=grid, rng=seed)
     with pytest.warns(SsdpcWarning, match="white frame"):
         cal = calibrate(frame, OPTICS)
     axis, ei, pitch, rot = grid_errors(cal, grid)
@@ -178,7 +180,7 @@ def test_flat_frame_sweep():
 
 
 def check_sample(grid, source, check_axis):
-    res = sim.simulate(pmma_bead(), OPTICS, grid=grid, source=source, rng=5)
+    res = simulate(pmma_bead(), OPTICS, grid=grid, source=source, rng=5)
     with pytest.warns(SsdpcWarning, match="white frame"):
         cal = calibrate(res.frame, OPTICS)
     axis, ei, pitch, rot = grid_errors(cal, grid)
@@ -195,7 +197,7 @@ def test_sample_frame_lattice():
     keeps this fast; it quantises the lit-lenslet brightness by a few per cent, which
     moves the axis by up to ~1 px, so only the lattice is checked here and the axis in
     the slow test below at the simulator's default source sampling."""
-    check_sample(SWEEP[4], sim.Source(step=4), check_axis=False)
+    check_sample(SWEEP[4], Source(step=4), check_axis=False)
 
 
 @pytest.mark.slow
@@ -320,12 +322,12 @@ def test_extract_views_rotated_grid_point_lands_at_its_pixel():
     """An in-focus absorbing 3 µm square at (40, −30) µm, on a grid rotated by 4°, appears
     in every lit view at pixel (40, −30) / object_pixel_um from the view centre."""
     grid = Grid.nominal(OPTICS, axis_offset_px=(21.3, -33.7), rotation_deg=4.0)
-    cal = calibrate(sim.white_frame(OPTICS, grid=grid, rng=7), OPTICS)
-    src = sim.Source(step=4)
+    cal = calibrate(white_frame(OPTICS, grid=grid, rng=7), OPTICS)
+    src = Source(step=4)
     xy = np.array([40.0, -30.0])
     obj = Composite((Box((xy[0], xy[1], 0.0), (3.0, 3.0, 0.5), 0.03j),))
-    img = sim.simulate(obj, OPTICS, grid=grid, source=src).intensity
-    flat = sim.flat_intensity(OPTICS, grid=grid, source=src)
+    img = simulate(obj, OPTICS, grid=grid, source=src).intensity
+    flat = flat_intensity(OPTICS, grid=grid, source=src)
     views, fviews = extract_views(img, cal), extract_views(flat, cal)
     h, w = views.data.shape[1:]
     assert views.data.dtype == np.float32 and len(views.lenslets) == len(cal.lenslets)
@@ -344,7 +346,7 @@ def test_extract_views_rotated_grid_point_lands_at_its_pixel():
 
 def test_insert_views_inverts_extract_views(white):
     grid, _, cal = white
-    frame = sim.white_intensity(OPTICS, grid=grid)
+    frame = white_intensity(OPTICS, grid=grid)
     back = insert_views(extract_views(frame, cal, order=3), cal, order=3)
     yy, xx = np.mgrid[: frame.shape[0], : frame.shape[1]]
     inner = np.zeros(frame.shape, bool)

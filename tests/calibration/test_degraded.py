@@ -21,9 +21,9 @@ from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation import imperfect
-from napari_ssdpc.simulation import simulate as sim
 from napari_ssdpc.simulation.camera import Camera
 from napari_ssdpc.simulation.imaging import array_as_built
+from napari_ssdpc.simulation.sample_free import white_frame, white_intensity
 
 PAPER = Optics.paper()
 GRID = Grid.nominal(PAPER, axis_offset_px=(21.3, -33.7), rotation_deg=4.0)
@@ -42,7 +42,7 @@ def calibrate_degraded(optics, grid, *, array=None, degrade=None, camera=None, s
     """Calibrate a degraded white frame; return (worst EI-centre error px, tolerance px,
     relative radius error, the calibration)."""
     grid, cam, truth, centres = array_as_built(optics, grid, camera, array)
-    intensity = sim.white_intensity(optics, grid, cam, array=array)
+    intensity = white_intensity(optics, grid, cam, array=array)
     if degrade is not None:
         intensity = degrade(intensity, centres, optics.ei_radius_px)
     frame = cam.apply(intensity, cam.rng(seed))
@@ -73,7 +73,7 @@ def test_imperfect_array_offsets_and_shear():
     assert 0.01 * cal.grid.pitch_px < cal.max_deviation_px < 0.06 * cal.grid.pitch_px
     row = cal.table[0]
     assert {"measured", "deviation_px"} <= set(row)
-    frame = sim.white_frame(PAPER, GRID, array=arr, rng=2)
+    frame = white_frame(PAPER, GRID, array=arr, rng=2)
     with pytest.warns(UserWarning, match="off a perfect lattice"):
         calibrate(frame, PAPER)
 
@@ -89,7 +89,7 @@ def test_eight_bit_camera():
 
 def test_float_frame_of_any_scale():
     cam = Camera()
-    frame = cam.apply(sim.white_intensity(PAPER, GRID, cam), cam.rng(3)).astype(np.float32) / 4095.0
+    frame = cam.apply(white_intensity(PAPER, GRID, cam), cam.rng(3)).astype(np.float32) / 4095.0
     cal = calibrate(frame, PAPER)
     assert math.hypot(*np.subtract(cal.grid.axis_px, GRID.axis_px)) < 0.1
 
@@ -171,7 +171,7 @@ def test_every_ei_lit_axis_assumed_or_given():
     optics = small_lenslet_optics(300, 300)
     grid = Grid.nominal(optics, axis_offset_px=(-4.2, 1.7), rotation_deg=-0.6)
     cam = Camera()
-    frame = cam.apply(sim.white_intensity(optics, grid, cam), cam.rng(1))
+    frame = cam.apply(white_intensity(optics, grid, cam), cam.rng(1))
     with pytest.warns(UserWarning, match="--axis"):
         cal = calibrate(frame, optics)
     assert cal.kind == "white" and cal.kind_evidence["axis"] == "sensor centre (assumed)"

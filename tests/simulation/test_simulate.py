@@ -15,8 +15,10 @@ import pytest
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.lattice import Grid
+from napari_ssdpc.physics.waves import propagate
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation.camera import Camera
+from napari_ssdpc.simulation.multislice import Sampling, Source, exit_field
 from napari_ssdpc.simulation.phantoms import (
     Box,
     Composite,
@@ -28,18 +30,8 @@ from napari_ssdpc.simulation.phantoms import (
     pmma_bead,
     two_beads,
 )
-from napari_ssdpc.simulation.simulate import (
-    Sampling,
-    Source,
-    effective_tan_theta,
-    exit_field,
-    flat_frame,
-    flat_intensity,
-    propagate,
-    simulate,
-    white_frame,
-    white_intensity,
-)
+from napari_ssdpc.simulation.sample_free import flat_frame, flat_intensity, white_frame, white_intensity
+from napari_ssdpc.simulation.simulate import effective_tan_theta, simulate
 
 CLEAN = Camera(noise=False, falloff=0.0)
 

@@ -128,12 +128,14 @@ def bead_frames():
     base = (_physics(optics), __version__)
 
     def simulated(kind: str, seed: int):  # only when the shipped frames are stale: the simulator loads then
-        from napari_ssdpc.simulation import simulate as sim
+        from napari_ssdpc.simulation.phantoms import pmma_bead
+        from napari_ssdpc.simulation.sample_free import flat_frame, white_frame
+        from napari_ssdpc.simulation.simulate import simulate
 
         rng = np.random.default_rng(seed)
         if kind == "bead":
-            return sim.simulate(sim.pmma_bead(), optics, rng=rng).frame
-        return (sim.flat_frame if kind == "flat" else sim.white_frame)(optics, rng=rng)
+            return simulate(pmma_bead(), optics, rng=rng).frame
+        return (flat_frame if kind == "flat" else white_frame)(optics, rng=rng)
 
     frame = _cached("pmma_bead", lambda: simulated("bead", 0), _key("bead", *base, 0))
     flat = _cached("pmma_bead_flat", lambda: simulated("flat", 1), _key("flat", *base, 1))
@@ -211,33 +213,34 @@ def series_frame(i: int, n_frames: int = SERIES_FRAMES) -> np.ndarray:
     -------
     ndarray, uint16, (H, W)
     """
-    from napari_ssdpc.simulation import simulate as sim
+    from napari_ssdpc.simulation.multislice import Source
+    from napari_ssdpc.simulation.phantoms import moving_sample
+    from napari_ssdpc.simulation.simulate import simulate
 
     optics = series_optics()
-    phantom = sim.moving_sample(n_frames)[i]
-    source = sim.Source(step=SERIES_SOURCE_STEP)
+    phantom = moving_sample(n_frames)[i]
+    source = Source(step=SERIES_SOURCE_STEP)
     key = _key("moving", _physics(optics), repr(phantom), SERIES_SOURCE_STEP, 1000 + i, __version__)
     return _cached(
         f"moving_{n_frames}_{i:03d}",
-        lambda: sim.simulate(phantom, optics, source=source, rng=np.random.default_rng(1000 + i)).frame,
+        lambda: simulate(phantom, optics, source=source, rng=np.random.default_rng(1000 + i)).frame,
         key,
     )
 
 
 def series_flat_white():
     """Flat (same reduced source sampling as the series) and white frames of the series' optics."""
-    from napari_ssdpc.simulation import simulate as sim
+    from napari_ssdpc.simulation.multislice import Source
+    from napari_ssdpc.simulation.sample_free import flat_frame, white_frame
 
     optics = series_optics()
     base = (_physics(optics), SERIES_SOURCE_STEP, __version__)
     flat = _cached(
         "moving_flat",
-        lambda: sim.flat_frame(optics, source=sim.Source(step=SERIES_SOURCE_STEP), rng=np.random.default_rng(3)),
+        lambda: flat_frame(optics, source=Source(step=SERIES_SOURCE_STEP), rng=np.random.default_rng(3)),
         _key("flat", *base, 3),
     )
-    white = _cached(
-        "moving_white", lambda: sim.white_frame(optics, rng=np.random.default_rng(4)), _key("white", *base, 4)
-    )
+    white = _cached("moving_white", lambda: white_frame(optics, rng=np.random.default_rng(4)), _key("white", *base, 4))
     return flat, white
 
 

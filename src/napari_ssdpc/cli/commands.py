@@ -165,7 +165,8 @@ def cmd_simulate(args):
     from napari_ssdpc.io.frames import write_tiffs
     from napari_ssdpc.physics.lattice import Grid
     from napari_ssdpc.progress import tqdm_callback
-    from napari_ssdpc.simulation import simulate as sim
+    from napari_ssdpc.simulation.sample_free import flat_frame, white_frame
+    from napari_ssdpc.simulation.simulate import simulate
 
     wanted = {"frame": args.output, "flat frame": args.flat, "white frame": args.white}
     outs = check_outputs({k: v for k, v in wanted.items() if v}, {"optics file": args.optics})
@@ -178,12 +179,12 @@ def cmd_simulate(args):
     frames = []
     for i, ph in enumerate(phantoms):
         with tqdm_callback(f"frame {i + 1}/{len(phantoms)}") as cb:
-            frames.append(sim.simulate(ph, optics, grid=grid, rng=rng, progress=cb).frame)
+            frames.append(simulate(ph, optics, grid=grid, rng=rng, progress=cb).frame)
     data = {outs["frame"]: np.stack(frames) if len(frames) > 1 else frames[0]}
     if "flat frame" in outs:
-        data[outs["flat frame"]] = sim.flat_frame(optics, grid=grid, rng=rng)
+        data[outs["flat frame"]] = flat_frame(optics, grid=grid, rng=rng)
     if "white frame" in outs:
-        data[outs["white frame"]] = sim.white_frame(optics, grid=grid, rng=rng)
+        data[outs["white frame"]] = white_frame(optics, grid=grid, rng=rng)
     write_tiffs(data)
     print(f"wrote {outs['frame']} {frames[0].shape} x {len(frames)} frame(s)")
     for role in ("flat frame", "white frame"):

@@ -44,6 +44,7 @@ import scipy.fft as sfft
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.physics.pupil import axial_frequency, mean_tilt, soft_disk, subaperture_pupil
+from napari_ssdpc.physics.waves import transfer_function
 from napari_ssdpc.settings.lenslets import Lenslet
 from napari_ssdpc.settings.optics import Optics
 
@@ -216,11 +217,9 @@ def _mla_transmittance(optics: Optics, apertures, xs, ys, dx):
 def _angular_spectrum(optics: Optics, n, dx):
     """Propagator over f_ml in air, exp(i2π f_ml sqrt(1/λ² − |f|²)) without its constant phase."""
     lam = optics.wavelength_um
-    f_ml = optics.mla_focal_length_mm * 1e3
     f = sfft.fftfreq(n, dx)
     f2 = f[None, :] ** 2 + f[:, None] ** 2
-    kz = np.sqrt(np.maximum(1.0 / lam**2 - f2, 0.0))
-    return np.where(f2 < 1.0 / lam**2, np.exp(2j * np.pi * f_ml * (kz - 1.0 / lam)), 0.0)
+    return transfer_function(f2, optics.mla_focal_length_mm * 1e3, 1.0, lam, eta0=1.0 / lam, cut_evanescent=True)
 
 
 # ------------------------------------------------------------------ fast form

@@ -24,47 +24,9 @@ from scipy import ndimage
 
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.physics.pupil import eta
+from napari_ssdpc.physics.waves import defocus_factor, disk_fraction, objective_pupil_cells, subaperture_windows
 from napari_ssdpc.simulation.camera import Camera
-from napari_ssdpc.simulation.multislice import disk_fraction, even_fast
-
-
-def lenslet_windows(lenslets, optics, sampling, nc, supersample=8):
-    """Per lenslet: absolute lattice index of the crop centre and the anti-aliased
-    sub-aperture A_k = P_obj · P_k on the crop (|amplitude|² = area fraction of the cell).
-
-    Parameters
-    ----------
-    lenslets : list of Lenslet
-        The K lenslets.
-    optics : Optics
-    sampling : Sampling
-        The object grid; its frequency lattice has the step ``sampling.du`` cycles/µm.
-    nc : int
-        Crop width, lattice units.
-    supersample : int
-        Sub-samples per lattice cell side.
-
-    Returns
-    -------
-    centres : ndarray, int, (K, 2)
-        Lattice index (ix, iy) of each crop centre, the nearest to u_k (units of du).
-    apertures : ndarray, float32, (K, nc, nc)
-        Amplitude of A_k on the crop (rows y, columns x), in [0, 1].
-    """
-    du, rho, cut = sampling.du, optics.subaperture_radius, optics.cutoff
-    off = np.arange(nc) - nc // 2
-    t = ((np.arange(supersample) + 0.5) / supersample - 0.5) * du
-    centres, apert = [], []
-    for ln in lenslets:
-        c = np.rint(np.asarray(ln.u) / du).astype(int)
-        ux = (c[0] + off) * du
-        uy = (c[1] + off) * du
-        sx = ux[None, :, None, None] + t[None, None, None, :]
-        sy = uy[:, None, None, None] + t[None, None, :, None]
-        inside = ((sx - ln.u[0]) ** 2 + (sy - ln.u[1]) ** 2 <= rho * rho) & (sx * sx + sy * sy <= cut * cut)
-        centres.append(c)
-        apert.append(np.sqrt(inside.mean(axis=(2, 3))))  # |A|² = area fraction: edge cells pass their share
-    return np.array(centres), np.array(apert, dtype=np.float32)
+from napari_ssdpc.simulation.multislice import even_fast
 
 
 def crop_size(optics, sampling):
@@ -107,7 +69,10 @@ class Imager:
     def __init__(self, optics, sampling, lenslets):
         self.optics, self.sampling, self.lenslets = optics, sampling, lenslets
         self.nc = crop_size(optics, sampling)
-        self.centres, self.apert = lenslet_windows(lenslets, optics, sampling, self.nc)
+        # A_k = P_obj · P_k on each lenslet's crop (|amplitude|² = area fraction of the cell)
+        self.centres, self.apert = subaperture_windows(
+            [ln.u for ln in lenslets], optics.subaperture_radius, optics.cutoff, sampling.du, self.nc
+        )
         self.off = np.arange(self.nc) - self.nc // 2
         self.acc = np.zeros((len(lenslets), self.nc, self.nc), dtype=np.float64)
         n = sampling.n
@@ -118,7 +83,7 @@ class Imager:
         u2 = u[None, :] ** 2 + u[:, None] ** 2
         # objective pupil before the iris, absolute lattice in FFT order: every cell that touches the
         # pupil passes; the exact (anti-aliased) pupil edge is applied with A_k after the iris
-        self.pupil = (u2 <= (optics.cutoff + sampling.du / math.sqrt(2)) ** 2).astype(np.float32)
+        self.pupil = objective_pupil_cells(u2, optics.cutoff, sampling.du)
         self.eta = eta(u2, optics.medium_index, optics.wavelength_um)
         self.scale = (self.nc / n) ** 4 / (math.pi * optics.subaperture_radius**2)
 
@@ -140,9 +105,9 @@ class Imager:
             Spectrum in FFT order; index i holds the frequency u_i + w of the plane wave w.
         """
         n = self.sampling.n
-        if getattr(self, "_z", None) != z_exit:  # exp(i2π z η(u)) P_obj(u) on the absolute lattice
+        if getattr(self, "_z", None) != z_exit:  # exp(i2π z η(u)) P_obj(u) on the absolute lattice (Eq. 6)
             self._z = z_exit
-            self._prop = (np.exp(2j * np.pi * z_exit * self.eta.real) * self.pupil).astype(np.complex64)
+            self._prop = (defocus_factor(self.eta, z_exit) * self.pupil).astype(np.complex64)
         F = sfft.fft2(v_full, workers=-1)
         e0 = self.eta[idx[1] % n, idx[0] % n].real
         F *= np.roll(self._prop, (-int(idx[1]), -int(idx[0])), axis=(0, 1))  # index i -> u_i + w

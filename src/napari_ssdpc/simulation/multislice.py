@@ -8,9 +8,10 @@
 2. Multislice (beam propagation) through the 3D RI phantom: slabs of thickness
    ≤ ``dz_um`` (0.5 µm), a phase/absorption screen exp(i2π ∫Δn dz / λ) per slab,
    angular-spectrum propagation in the medium between them, exp(+i2π d η(u)),
-   η(u) = sqrt((n/λ)² − |u|²). Empty slabs are skipped (one step across a gap). The
-   field is carried as the envelope V = U·exp(−i2π w·x) of the tilted wave, on a
-   sub-grid around the phantom, and embedded into the full grid afterwards.
+   η(u) = sqrt((n/λ)² − |u|²) (``physics.waves``, as the source sampling). Empty slabs
+   are skipped (one step across a gap). The field is carried as the envelope
+   V = U·exp(−i2π w·x) of the tilted wave, on a sub-grid around the phantom, and embedded
+   into the full grid afterwards.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import numpy as np
 import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.physics.pupil import eta
+from napari_ssdpc.physics.waves import apply_transfer, kohler_source, propagator
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation.phantoms import (
     Phantom,
@@ -170,121 +171,25 @@ class Source:
         return na / optics.wavelength_um
 
     def points(self, optics: Optics, sampling: Sampling):
-        """Integer lattice indices (K, 2) as (ix, iy), frequencies (K, 2) and weights (K,).
+        """The source points of these optics on the grid's frequency lattice.
 
         Parameters
         ----------
         optics : Optics
+            Its wavelength and condenser NA (unless ``na`` is set) give the disk.
         sampling : Sampling
+            Its lattice step ``du`` places the points.
 
         Returns
         -------
-        idx : ndarray, int, (K, 2)
-            Lattice indices (ix, iy), units of du.
-        w : ndarray, (K, 2)
-            Plane-wave frequencies (ux, uy), cycles/µm.
-        weights : ndarray, (K,)
-            Area of each point's cell inside the disk, (cycles/µm)².
+        tuple of ndarray
+            ``(idx, w, weights)``: lattice indices (K, 2), frequencies (K, 2) in cycles/µm and
+            weights (K,) in (cycles/µm)², as :func:`napari_ssdpc.physics.waves.kohler_source` gives them.
         """
-        r = self.radius(optics)
-        h = int(self.step)
-        du = sampling.du
-        m = int(math.ceil(r / (h * du))) + 1
-        i = np.arange(-m, m + 1)
-        ix, iy = np.meshgrid(i, i)
-        ix, iy = ix.ravel(), iy.ravel()
-        cx, cy = ix * h * du, iy * h * du
-        half = 0.5 * h * du
-        near = np.hypot(np.abs(cx) - half, np.abs(cy) - half)  # nearest corner distance
-        far = np.hypot(np.abs(cx) + half, np.abs(cy) + half)  # farthest corner
-        wgt = np.where(far <= r, (h * du) ** 2, 0.0)
-        edge = np.nonzero((far > r) & ((near < r) | (np.abs(cx) < half) | (np.abs(cy) < half)))[0]
-        if len(edge):
-            s = int(self.supersample)
-            t = ((np.arange(s) + 0.5) / s - 0.5) * h * du
-            sx = cx[edge, None, None] + t[None, None, :]
-            sy = cy[edge, None, None] + t[None, :, None]
-            wgt[edge] = np.mean(sx * sx + sy * sy <= r * r, axis=(1, 2)) * (h * du) ** 2
-        keep = wgt > 0
-        idx = np.stack([ix[keep] * h, iy[keep] * h], axis=1)
-        return idx, idx * du, wgt[keep]
+        return kohler_source(self.radius(optics), sampling.du, int(self.step), int(self.supersample))
 
 
-def disk_fraction(x, y, radius, pixel, supersample=8):
-    """Fraction of each pixel (side ``pixel``, centred at x, y) inside the disk r <= radius.
-
-    Parameters
-    ----------
-    x, y : ndarray
-        Pixel centres (broadcast), any length unit.
-    radius : float
-        Disk radius, same unit.
-    pixel : float
-        Pixel side, same unit.
-    supersample : int
-        Sub-samples per pixel side for the pixels on the edge.
-
-    Returns
-    -------
-    ndarray, float64
-        Fraction in [0, 1], the broadcast shape of ``x`` and ``y``.
-    """
-    x, y = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float))
-    r = np.hypot(x, y)
-    out = (r <= radius).astype(np.float64)
-    edge = np.abs(r - radius) < pixel
-    if edge.any():
-        t = ((np.arange(supersample) + 0.5) / supersample - 0.5) * pixel
-        ex, ey = x[edge][:, None, None] + t[None, None, :], y[edge][:, None, None] + t[None, :, None]
-        out[edge] = np.mean(ex * ex + ey * ey <= radius * radius, axis=(1, 2))
-    return out
-
-
-# ----------------------------------------------------------------------- propagation
-def propagate(field, d_um: float, dx_um: float, wavelength_um: float, n_medium: float, tilt=(0.0, 0.0)):
-    """Angular-spectrum propagation of a 2D field (y, x) over ``d_um`` forward
-    (toward the objective) in a medium: spectrum x exp(+i2π d [η(u + w) − η(w)]);
-    evanescent components (|u + w| > n/λ) are damped for either sign of d.
-
-    ``tilt`` = w (cycles/µm): the field is the envelope V of U = V exp(i2π w·x); for
-    w = 0 it is the field itself (the constant phase exp(i2π d η(0)) is dropped).
-
-    Parameters
-    ----------
-    field : ndarray, complex, (ny, nx)
-        The field (or its envelope V for a non-zero ``tilt``).
-    d_um : float
-        Distance, µm (> 0: toward the objective).
-    dx_um : float
-        Sampling, µm.
-    wavelength_um : float
-        Vacuum wavelength, µm.
-    n_medium : float
-        Refractive index of the medium.
-    tilt : (float, float)
-        w (x, y), cycles/µm.
-
-    Returns
-    -------
-    ndarray, complex, (ny, nx)
-        The propagated field (envelope), dtype of ``field`` if complex, else complex128.
-    """
-    field = np.asarray(field)
-    ny, nx = field.shape
-    H = _propagator(ny, nx, dx_um, d_um, wavelength_um, n_medium, tilt)
-    out = sfft.ifft2(sfft.fft2(field, workers=-1) * H, workers=-1)
-    return out.astype(field.dtype if np.iscomplexobj(field) else np.complex128, copy=False)
-
-
-def _propagator(ny, nx, dx_um, d_um, wavelength_um, n_medium, tilt, dtype=np.complex64):
-    uy = np.fft.fftfreq(ny, dx_um)[:, None] + tilt[1]
-    ux = np.fft.fftfreq(nx, dx_um)[None, :] + tilt[0]
-    e = eta(ux * ux + uy * uy, n_medium, wavelength_um)
-    e0 = eta(tilt[0] ** 2 + tilt[1] ** 2, n_medium, wavelength_um).real
-    # evanescent components decay in both directions (back-propagation must not amplify them)
-    return (np.exp(2j * np.pi * d_um * (e.real - e0)) * np.exp(-2 * np.pi * abs(d_um) * e.imag)).astype(dtype)
-
-
+# ------------------------------------------------------------------------ multislice
 class Slabs:
     """Multislice: the phantom's phase/absorption screens on a sub-grid around it.
 
@@ -374,8 +279,8 @@ class Slabs:
         for k in range(1, len(self.screens)):
             d = round(self.z[k - 1] - self.z[k], 9)
             if d not in cache:
-                cache[d] = _propagator(self.ns, self.ns, self.dx, d, self.lam, self.nm, tilt)
-            v = sfft.ifft2(sfft.fft2(v, workers=-1) * cache[d], workers=-1) * self.screens[k]
+                cache[d] = propagator(self.ns, self.ns, self.dx, d, self.lam, self.nm, tilt)  # H_d, paper Eq. 6
+            v = apply_transfer(v, cache[d]) * self.screens[k]
         return v
 
     def embed(self, v, n) -> np.ndarray:

@@ -10,6 +10,7 @@ import scipy.fft as sfft
 from scipy import special
 
 from napari_ssdpc.physics.lattice import Grid
+from napari_ssdpc.physics.waves import in_subaperture
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation.camera import Camera
 from napari_ssdpc.simulation.imaging import Imager, array_as_built, crop_size, render
@@ -70,7 +71,7 @@ def _incoherent_otf(u_k, optics, du, nc, q=4):
     m = int(math.ceil((rho + 2 * du) / d))
     t = np.arange(-m, m + 1) * d
     sx, sy = u_k[0] + t[None, :], u_k[1] + t[:, None]
-    a = (((sx - u_k[0]) ** 2 + (sy - u_k[1]) ** 2 <= rho * rho) & (sx * sx + sy * sy <= cut * cut)).astype(float)
+    a = in_subaperture(sx, sy, u_k, rho, cut).astype(float)
     N = sfft.next_fast_len(2 * len(t) + 1)
     ac = sfft.ifft2(np.abs(sfft.fft2(a, s=(N, N), workers=-1)) ** 2, workers=-1).real
     lag = (np.fft.fftfreq(nc, 1.0 / nc).astype(int) * q) % N

@@ -23,57 +23,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from napari_ssdpc.physics.lattice import Grid
+from napari_ssdpc.physics.pupil import mean_tilt
+from napari_ssdpc.physics.waves import in_subaperture
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation.camera import Camera
 from napari_ssdpc.simulation.imaging import Imager, array_as_built, render
 from napari_ssdpc.simulation.imperfect import ArrayErrors
-from napari_ssdpc.simulation.multislice import DZ_UM, Sampling, Slabs, Source, exit_field, propagate
-from napari_ssdpc.simulation.phantoms import (
-    BarTarget,
-    Box,
-    Cell,
-    Composite,
-    Ellipsoid,
-    Phantom,
-    Sphere,
-    Spheres,
-    bar_target,
-    cell,
-    moving_sample,
-    optics_for,
-    pmma_bead,
-    two_beads,
-)
-from napari_ssdpc.simulation.sample_free import flat_frame, flat_intensity, white_frame, white_intensity
+from napari_ssdpc.simulation.multislice import DZ_UM, Sampling, Slabs, Source
+from napari_ssdpc.simulation.phantoms import Phantom, optics_for
 
-__all__ = [
-    "Camera",
-    "Sampling",
-    "Source",
-    "Simulation",
-    "simulate",
-    "white_frame",
-    "flat_frame",
-    "white_intensity",
-    "flat_intensity",
-    "propagate",
-    "exit_field",
-    "effective_tan_theta",
-    # phantoms (re-exported from core.phantoms)
-    "Phantom",
-    "Sphere",
-    "Spheres",
-    "Cell",
-    "BarTarget",
-    "Composite",
-    "Ellipsoid",
-    "Box",
-    "pmma_bead",
-    "two_beads",
-    "cell",
-    "bar_target",
-    "moving_sample",
-]
+__all__ = ["Simulation", "effective_tan_theta", "simulate"]
 
 
 @dataclass
@@ -224,10 +183,8 @@ def effective_tan_theta(optics: Optics, lenslet, supersample: int = 400) -> np.n
     ndarray, (2,)
         tanθ·û (x, y), dimensionless: µm of lateral shift per µm of depth.
     """
-    rho, cut = optics.subaperture_radius, optics.cutoff
+    rho = optics.subaperture_radius
     t = np.linspace(-rho, rho, supersample)
     ux, uy = np.meshgrid(lenslet.u[0] + t, lenslet.u[1] + t)
-    a = ((ux - lenslet.u[0]) ** 2 + (uy - lenslet.u[1]) ** 2 <= rho * rho) & (ux * ux + uy * uy <= cut * cut)
-    s2 = (optics.wavelength_um / optics.medium_index) ** 2 * (ux * ux + uy * uy)
-    k = optics.wavelength_um / optics.medium_index / np.sqrt(1 - s2)  # tanθ·û = k·u
-    return np.array([np.mean((k * ux)[a]), np.mean((k * uy)[a])])
+    a = in_subaperture(ux, uy, lenslet.u, rho, optics.cutoff)
+    return mean_tilt(optics, a[a].astype(float), ux[a], uy[a])  # tanθ·û = u/η(u), averaged over A_k

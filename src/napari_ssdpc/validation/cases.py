@@ -21,7 +21,9 @@ from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.reconstruction.pipeline import Reconstructor
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation import phantoms as ph
-from napari_ssdpc.simulation import simulate as sim
+from napari_ssdpc.simulation.multislice import Source
+from napari_ssdpc.simulation.sample_free import flat_frame, white_frame
+from napari_ssdpc.simulation.simulate import simulate
 from napari_ssdpc.validation import metrics as an
 
 #: Condenser NA used for validation: σ = 0.75 puts the source edge across the outer lenslet rings,
@@ -96,18 +98,18 @@ def simulate_case(
     grid = Grid.nominal(optics, axis_offset_px=axis_offset_px, rotation_deg=rotation_deg)
     step = "" if source_step == 2 else f"_step{source_step}"
     path = None if cache_dir is None else Path(cache_dir) / f"{name}_na{optics.condenser_na:g}_s{seed}{step}.npz"
-    source = sim.Source(step=source_step)
+    source = Source(step=source_step)
     if path is not None and path.is_file():
         d = np.load(path)
         return Case(name, optics, phantom, d["frame"], d["flat"], d["white"], grid, float(d["seconds"]))
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
     phs = phantom if isinstance(phantom, list) else [phantom]
-    frames = np.stack([sim.simulate(p, optics, grid=grid, rng=rng, source=source).frame for p in phs])
+    frames = np.stack([simulate(p, optics, grid=grid, rng=rng, source=source).frame for p in phs])
     seconds = (time.perf_counter() - t0) / len(phs)
     frame = frames if isinstance(phantom, list) else frames[0]
-    flat = sim.flat_frame(optics, grid=grid, rng=rng, source=source)
-    white = sim.white_frame(optics, grid=grid, rng=rng)
+    flat = flat_frame(optics, grid=grid, rng=rng, source=source)
+    white = white_frame(optics, grid=grid, rng=rng)
     if path is not None:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)

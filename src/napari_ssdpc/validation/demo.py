@@ -15,7 +15,8 @@ from napari_ssdpc.progress import tqdm_callback
 from napari_ssdpc.reconstruction.pipeline import Reconstructor
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation import phantoms
-from napari_ssdpc.simulation import simulate as sim
+from napari_ssdpc.simulation.sample_free import flat_frame, white_frame
+from napari_ssdpc.simulation.simulate import simulate
 from napari_ssdpc.validation.cases import VALIDATION_NA, bead_metrics
 from napari_ssdpc.validation.figures import bead_figure
 
@@ -60,9 +61,9 @@ def run_demo(out: Path, optics: Optics | None = None, seed: int = 0, z=(-80.0, 8
     grid = Grid.nominal(optics, axis_offset_px=(7.3, -4.1), rotation_deg=0.6)
     t0 = time.perf_counter()
     with tqdm_callback("simulating the PMMA bead", unit="source point") as cb:
-        frame = sim.simulate(bead, optics, grid=grid, rng=rng, progress=cb).frame
-    flat = sim.flat_frame(optics, grid=grid, rng=rng)
-    white = sim.white_frame(optics, grid=grid, rng=rng)
+        frame = simulate(bead, optics, grid=grid, rng=rng, progress=cb).frame
+    flat = flat_frame(optics, grid=grid, rng=rng)
+    white = white_frame(optics, grid=grid, rng=rng)
     t_sim = time.perf_counter() - t0
     write_tiffs({out / "bead.tif": frame, out / "flat.tif": flat, out / "white.tif": white})
     print(f"simulated bead, flat and white frames in {t_sim:.0f} s")
