@@ -9,7 +9,7 @@ from tqdm.auto import tqdm
 
 
 @contextlib.contextmanager
-def tqdm_callback(desc: str, unit: str = "step"):
+def tqdm_callback(desc: str, unit: str = "step", disable: bool = False):
     """A ``progress(done, total)`` callable that drives a tqdm bar on stderr.
 
     Parameters
@@ -18,6 +18,8 @@ def tqdm_callback(desc: str, unit: str = "step"):
         The bar's label.
     unit : str
         What one step is ("plane", "frame", "iteration").
+    disable : bool
+        No bar (the work runs elsewhere).
 
     Yields
     ------
@@ -27,7 +29,15 @@ def tqdm_callback(desc: str, unit: str = "step"):
     """
     tty = sys.stderr.isatty()
     # in a log file, a line every 10 s is enough
-    bar = tqdm(desc=desc, unit=unit, file=sys.stderr, leave=False, dynamic_ncols=True, mininterval=0.5 if tty else 10)
+    bar = tqdm(
+        desc=desc,
+        unit=unit,
+        file=sys.stderr,
+        leave=False,
+        dynamic_ncols=True,
+        mininterval=0.5 if tty else 10,
+        disable=disable,
+    )
 
     def update(done, total, *_):
         if bar.total != total:

@@ -86,7 +86,7 @@ def test_the_ssdpc_dock_runs_the_workflow_and_fits_a_laptop_screen(make_napari_v
     cfg = RunConfig.from_yaml(path)  # what `ssdpc reconstruct --config run.yaml` reads
     rec = cfg.reconstruction
     assert (rec.z_min_um, rec.z_max_um, rec.dz_um) == (Z[0], Z[1], DZ)
-    assert (rec.sign, rec.tv_iterations, rec.rl_iterations) == ("lighter", 25, 7)
+    assert (rec.tv.sign, rec.tv.iterations, rec.rl.iterations) == ("lighter", 25, 7)
     assert cfg.optics.condenser_na == optics.condenser_na == 0.3
 
     w["operators"].z_min.value, w["operators"].sign.value, w["reconstruct"].iterations.value = -40.0, "any", 3
@@ -111,7 +111,7 @@ def test_the_ssdpc_dock_runs_the_workflow_and_fits_a_laptop_screen(make_napari_v
     circles = viewer.layers["PMMA bead white EI circles"]
     assert np.allclose(circles.scale, raw.scale) and np.allclose(circles.translate, raw.translate)
     # the run was remembered: a new dock in a new viewer starts from it
-    assert RunConfig.from_yaml(_session.remembered_settings_path()).reconstruction.tv_iterations == 25
+    assert RunConfig.from_yaml(_session.remembered_settings_path()).reconstruction.tv.iterations == 25
 
 
 def test_a_series_streams_to_ome_zarr_and_is_shown_from_disk(make_napari_viewer, qtbot, monkeypatch, tmp_path):

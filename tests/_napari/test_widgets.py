@@ -21,8 +21,9 @@ import gui_steps as _steps
 from napari_ssdpc._napari import notify as _notify
 from napari_ssdpc._napari import sample_data as _sample_data
 from napari_ssdpc._napari import widgets as _widgets
-from napari_ssdpc.calibration.calibrate import calibrate
-from napari_ssdpc.reconstruction.pipeline import Reconstructor
+from napari_ssdpc.calibration import calibrate
+from napari_ssdpc.reconstruction.reconstructor import Reconstructor
+from napari_ssdpc.validation.cases import run_config
 
 Z, DZ, ITER = (-20.0, 20.0), 2.0, 3
 
@@ -81,11 +82,11 @@ def test_end_to_end_bead(make_napari_viewer, qtbot, bead, errors):
     assert ri.data.shape == (21, 145, 145)
     assert np.allclose(ri.scale, (DZ, optics.object_pixel_um, optics.object_pixel_um), rtol=2e-3)
     assert tuple(ri.axis_labels) == ("z", "y", "x") and ri.translate[0] == Z[0]
-    assert ri.metadata["ssdpc"]["settings"]["rl_iterations"] == ITER
+    assert ri.metadata["ssdpc"]["settings"]["rl"]["iterations"] == ITER
 
     # exactly what core gives on the same input
     cal = calibrate(white, optics)
-    res = Reconstructor(optics, cal, z=Z, dz=DZ, iterations=ITER, alpha=None, flat=flat).reconstruct(frame)
+    res = Reconstructor(run_config(optics, z=Z, dz=DZ, rl={"iterations": ITER}), cal, flat=flat).reconstruct(frame)
     assert np.array_equal(ri.data, res.ri)
     assert np.array_equal(ri.scale, res.voxel_um)
     # the bead (n 1.49 in 1.518) is visible: Δn < 0 at its centre (world origin)
@@ -105,7 +106,7 @@ def test_end_to_end_bead(make_napari_viewer, qtbot, bead, errors):
     _steps.wait_for(qtbot, w["reconstruct"])
     assert viewer.layers["PMMA bead RI"] is ri and len(viewer.layers) == n_layers + 1
     assert ri.colormap.name == "viridis"
-    assert ri.metadata["ssdpc"]["settings"]["rl_iterations"] == ITER + 1
+    assert ri.metadata["ssdpc"]["settings"]["rl"]["iterations"] == ITER + 1
     phase = viewer.layers["PMMA bead phase"]
     assert phase.data.shape == ri.data.shape and phase.colormap.name == "RdBu_r"
 
@@ -116,7 +117,7 @@ def test_end_to_end_bead(make_napari_viewer, qtbot, bead, errors):
     first = rec.lenslets[0]  # the lenslet picker starts at the first lit lenslet
     psf = viewer.layers[f"lenslet ({first.row}, {first.col}) PSF"]
     k = 0
-    assert np.array_equal(psf.data, rec.psf.kernels(rec.z_um)[k]) and psf.data.shape[0] == 21
+    assert np.array_equal(psf.data, rec.stacks.psf.kernels(rec.z_um)[k]) and psf.data.shape[0] == 21
     assert np.allclose(psf.scale, (DZ, rec.pixel_um, rec.pixel_um))
     assert errors == []
 
@@ -148,7 +149,7 @@ def test_time_series_gives_tzyx_layer(make_napari_viewer, qtbot, errors):
     assert "t" in viewer.dims.axis_labels
     # frame 2 is the core's reconstruction of frame 2
     cal = calibrate(white, optics)
-    rec = Reconstructor(optics, cal, z=Z, dz=DZ, iterations=ITER, flat=flat)
+    rec = Reconstructor(run_config(optics, z=Z, dz=DZ, rl={"iterations": ITER}), cal, flat=flat)
     assert np.array_equal(ri.data[2], rec.reconstruct(np.asarray(series[2])).ri)
     assert not np.array_equal(ri.data[0], ri.data[2])  # the sample moves
 
@@ -158,7 +159,7 @@ def test_cancel_stops_a_running_reconstruction(make_napari_viewer, qtbot, bead, 
     viewer = make_napari_viewer()
     w = _setup_bead(viewer, qtbot, optics)
     rc = w["reconstruct"]
-    rc.iterations.value = 5000  # minutes of RL if not stopped
+    rc.iterations.value = 500  # the most the settings allow: minutes of RL if not stopped
     reports = []
     worker = rc.run()
     worker.yielded.connect(reports.append)
@@ -168,7 +169,7 @@ def test_cancel_stops_a_running_reconstruction(make_napari_viewer, qtbot, bead, 
     _steps.wait_for(qtbot, rc)
     stopped_s = time.perf_counter() - t0
     rl = [r for r in reports if r[2].startswith("RL")]
-    assert rl[-1][0] < rl[-1][1] / 10  # far from the end of the 4 x 5000 iterations
+    assert rl[-1][0] < rl[-1][1] / 10  # far from the end of the 4 x 500 iterations
     assert stopped_s < 10.0, f"took {stopped_s:.1f} s to stop"
     assert rc.status.value == "cancelled" and "PMMA bead RI" not in viewer.layers
     assert rc.run_button.enabled and not rc.cancel_button.enabled

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 import tifffile
 
-from napari_ssdpc.cli import checks
 from napari_ssdpc.cli.main import build_parser
+from napari_ssdpc.reconstruction import checks
 from napari_ssdpc.settings.optics import Optics
 
 PAPER = json.dumps({k: v for k, v in Optics.paper().to_dict().items() if k != "flip_x"}) + "\n"
@@ -160,7 +160,9 @@ def test_7_a_calibration_for_other_optics_or_edited_is_refused(synthetic_series,
         ("optics: {flip_x: 'false', " + PAPER[1:], "flip_x"),
         ("reconstruction: {dz_um: 1}\nreconstruction: {dz_um: 2}\n", "given twice"),
         ("reconstruction: {dz_um: abc}\n", "dz_um"),
-        ("reconstruction: {rl_iterations: null}\n", "rl_iterations"),
+        ("reconstruction: {rl_iterations: null}\n", "rl.iterations"),
+        ("reconstruction: {rl: {iterations: null}}\n", "rl.iterations"),
+        ("reconstruction: {}\noutputs: {save: [magic]}\n", "unknown output"),
         ("a: " + "[" * 3000 + "]" * 3000 + "\n", "nested too deeply"),
     ],
 )
@@ -185,7 +187,7 @@ def test_9_impossible_sizes_are_refused_before_allocating(files, sums, cli, rec_
         (["--z", "-80", "80", "--dz", "1e-9"], "dz_um"),
         (["--z", "-80", "80", "--dz", "0.001"], "dz_um"),
         (["--z", "-5000", "5000", "--dz", "1"], "10001 planes"),
-        (["--iterations", "501"], "rl_iterations"),
+        (["--iterations", "501"], "rl.iterations"),
     ):
         rc, err = cli(rec_args(tmp_path / "o.ome.tif", *flags))
         assert rc == 2 and words in err, (flags, err)
@@ -290,7 +292,7 @@ def test_10_the_demo_never_replaces_a_file_it_did_not_write(cli, tmp_path):
 def test_10_files_we_wrote_are_known_as_ours(files, tmp_path):
     """Frames and overlays carry the napari-ssdpc stamp, so a rerun may replace them; a user's
     TIFF or PNG does not."""
-    from napari_ssdpc.calibration.calibrate import Calibration, overlay_png
+    from napari_ssdpc.calibration import Calibration, overlay_png
     from napari_ssdpc.io.frames import write_tiff
     from napari_ssdpc.io.paths import is_ours
     from napari_ssdpc.validation.figures import _plt

@@ -145,7 +145,7 @@ def test_outputs_are_compared_with_inputs_after_resolving(tmp_path, monkeypatch)
 
 @pytest.mark.parametrize("frames", [1, 3])
 def test_a_half_truncated_tiff_is_refused_by_both_readers(tmp_path, frames):
-    from napari_ssdpc.io.series import FrameSource
+    from napari_ssdpc.io.frame_source import FrameSource
 
     a = np.arange(frames * 64 * 80, dtype="u2").reshape(frames, 64, 80).squeeze()
     full, half = tmp_path / "full.tif", tmp_path / "half.tif"

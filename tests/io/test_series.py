@@ -15,10 +15,15 @@ from napari_ssdpc.cli.main import main
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.frame_source import FrameSource, PagedSeries
 from napari_ssdpc.io.frames import read_ome_zarr
-from napari_ssdpc.io.series import Recipe, done_frames, reconstruct_series
+from napari_ssdpc.io.store import done_frames
+from napari_ssdpc.pipeline.job import Job
+from napari_ssdpc.pipeline.run import Pipeline
+from napari_ssdpc.pipeline.sinks import ZarrSink
 from napari_ssdpc.reconstruction.backend import gpu_available
+from napari_ssdpc.reconstruction.reconstructor import Reconstructor
+from napari_ssdpc.validation.cases import run_config
 
-SETTINGS = dict(z=(-20.0, 20.0), dz=10.0, iterations=2, method="rl", stacks=True)
+SETTINGS = dict(z=(-20.0, 20.0), dz=10.0, rl={"iterations": 2}, method="rl")
 CLI = ["--z", "-20", "20", "--dz", "10", "--iterations", "2", "--method", "rl"]
 
 
@@ -40,7 +45,7 @@ def files(data, tmp_path_factory):
 @pytest.fixture(scope="module")
 def recipe(data):
     optics, cal, flat, _ = data
-    return Recipe(optics, cal, dict(SETTINGS), flat)
+    return Job(run_config(optics, **SETTINGS), cal, flat, stacks=True)
 
 
 @pytest.fixture(scope="module")
@@ -80,7 +85,7 @@ def test_series_store_holds_every_frame_as_reconstructed_alone(serial, data, rec
     ri, voxel, attrs = read_ome_zarr(serial, "ri")
     assert ri.shape == (6, 5) + rec.mask.shape and ri.chunks == (1, 5) + rec.mask.shape  # one chunk per frame
     assert voxel == pytest.approx((10.0, rec.pixel_um, rec.pixel_um))
-    assert attrs["settings"]["rl_iterations"] == 2 and attrs["quantity"] == "refractive index"
+    assert attrs["settings"]["rl"]["iterations"] == 2 and attrs["quantity"] == "refractive index"
     assert list(done_frames(serial)) == list(range(6))
     for t in (0, 5):
         res = rec.reconstruct(frames[t])
@@ -112,7 +117,8 @@ def test_frames_are_streamed_not_loaded(data, recipe, rec, tmp_path):
     peaks = {}
     for n in (2, 12):
         tracemalloc.start()
-        reconstruct_series(packed, tmp_path / f"out{n}.zarr", recipe, rec=rec, progress=False, stop_after=n)
+        sink = ZarrSink(tmp_path / f"out{n}.zarr")
+        Pipeline(recipe, reconstructor=rec).run(packed, sink, progress=False, stop_after=n)
         peaks[n] = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
     assert list(done_frames(tmp_path / "out2.zarr")) == [0, 1]
@@ -159,19 +165,20 @@ def test_dask_local_cluster_of_two_workers_equals_the_serial_run(serial, files, 
         np.testing.assert_array_equal(a, ref[n])
 
 
-def test_series_bad_input(files, recipe, data, tmp_path, capsys):
+def test_series_bad_input(files, recipe, rec, data, tmp_path, capsys):
     _, _, _, frames = data
-    with pytest.raises(SsdpcError, match="frames of shape .* differ from the calibration"):
-        reconstruct_series(frames[:2, :-8], tmp_path / "a.zarr", recipe, progress=False)
+    pipeline = Pipeline(recipe, reconstructor=rec)
+    with pytest.raises(SsdpcError, match="frame shape .* differs from the calibration"):
+        pipeline.run(frames[:2, :-8], ZarrSink(tmp_path / "a.zarr"), progress=False)
     with pytest.raises(SsdpcError, match="--workers must be >= 1"):
-        reconstruct_series(files / "series.tif", tmp_path / "b.zarr", recipe, workers=0)
+        Pipeline(recipe, workers=0)
     with pytest.raises(SsdpcError, match="give the series as a TIFF path"):
-        reconstruct_series(frames[:2], tmp_path / "c.zarr", recipe, workers=2)
+        Pipeline(recipe, workers=2).run(frames[:2], ZarrSink(tmp_path / "c.zarr"))
     foreign = tmp_path / "foreign.zarr"
     foreign.mkdir()
     (foreign / "data.txt").write_text("not ours")
     with pytest.raises(SsdpcError, match="not written by `ssdpc reconstruct`"):
-        reconstruct_series(frames[:1], foreign, recipe, progress=False)
+        pipeline.run(frames[:1], ZarrSink(foreign), progress=False)
     capsys.readouterr()
     assert main(_args(files, tmp_path / "one.ome.tif") + ["--workers", "2"]) == 2
     err = capsys.readouterr().err
@@ -195,3 +202,22 @@ def test_series_bad_input(files, recipe, data, tmp_path, capsys):
     )
     assert "file not found" in capsys.readouterr().err
     assert not (tmp_path / "m.zarr").exists()
+
+
+def test_a_store_is_resumed_on_the_other_device(data, recipe, rec, tmp_path):
+    """The store promises that a run may be resumed on the other device (CPU and GPU agree to float
+    rounding): the device is part of the operators' key, not of what the store holds."""
+    from fake_device import fake_gpu
+
+    optics, cal, flat, frames = data
+    gpu = Job(run_config(optics, device="gpu", **SETTINGS), cal, flat, stacks=True)
+    assert gpu.result_key == recipe.result_key and gpu.key != recipe.key
+    out = tmp_path / "resumed.zarr"
+    Pipeline(recipe, reconstructor=rec).run(frames[:3], ZarrSink(out), progress=False, stop_after=1)
+    on_gpu = (
+        gpu.build() if gpu_available() else Reconstructor(gpu.config, cal, flat=flat, stacks=True, backend=fake_gpu())
+    )
+    report = Pipeline(gpu, reconstructor=on_gpu).run(frames[:3], ZarrSink(out), progress=False)
+    assert (report.skipped, report.written) == (1, 2) and list(done_frames(out)) == [0, 1, 2]
+    ri = read_ome_zarr(out, "ri")[0]
+    np.testing.assert_allclose(ri[2], rec.reconstruct(frames[2]).ri, atol=1e-5)

@@ -9,7 +9,6 @@ import hashlib
 import os
 import subprocess
 import sys
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -18,34 +17,46 @@ import zarr.storage._local as zlocal
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.frame_source import FrameSource
 from napari_ssdpc.io.frames import read_ome_zarr
-from napari_ssdpc.io.series import Recipe, reconstruct_series
 from napari_ssdpc.io.store import StoreLock, done_frames, read_complete
+from napari_ssdpc.pipeline.job import Job
+from napari_ssdpc.pipeline.run import Pipeline
+from napari_ssdpc.pipeline.sinks import ZarrSink
+from napari_ssdpc.reconstruction.checks import check_result
+from napari_ssdpc.reconstruction.reconstructor import Result
+from napari_ssdpc.settings.config import RunConfig
 
 
 class FakeRec:
-    """The part of a Reconstructor that reconstruct_series uses: Δn = frame mean / 1e6."""
+    """A Reconstructor's contract in small: (2, 8, 8) volumes with Δn = frame mean / 1e6, checked
+    before they are returned."""
 
     z_um = np.array([0.0, 1.0])
     y_um = x_um = (np.arange(8) - 3.5) * 0.5
-    mask = np.ones((8, 8), bool)
-    dz, pixel_um, build_seconds = 1.0, 0.5, 0.0
+    build_seconds = 0.0
+    optics = None
 
     def settings(self):
         return {"dz_um": 1.0}
 
-    def reconstruct(self, frame):
-        v = np.full((2, 8, 8), float(np.mean(frame)) / 1e6, np.float32)
-        return SimpleNamespace(ri=1.5 + v, phase=v, timings={})
+    def volume(self, frame):
+        return np.full((2, 8, 8), float(np.mean(frame)) / 1e6, np.float32)
+
+    def reconstruct(self, frame, *, warm=None, progress=None, should_stop=None, name="frame"):
+        v = self.volume(frame)
+        check_result(v, self.optics, name=f"volume of {name}")
+        grid = dict(z_um=self.z_um, y_um=self.y_um, x_um=self.x_um, settings=self.settings())
+        return Result(ri=1.5 + v, delta_n=v, phase=v, absorption=None, dpc={}, stacks={}, **grid)
 
 
 @pytest.fixture(scope="module")
 def setup(synthetic_series):
     optics, cal, flat, frames, _ = synthetic_series
-    return Recipe(optics, cal, {"dz": 1.0}, None), frames[:3]
+    FakeRec.optics = optics
+    return Job(RunConfig.of(optics, dz_um=1.0), cal), frames[:3]
 
 
-def run(recipe, frames, out, **kw):
-    return reconstruct_series(frames, out, recipe, rec=FakeRec(), save=["phase"], progress=False, **kw)
+def run(job, frames, out, rec=None, **kw):
+    return Pipeline(job, reconstructor=rec or FakeRec()).run(frames, ZarrSink(out, ["phase"]), progress=False, **kw)
 
 
 def tree_sha(folder):
@@ -227,14 +238,14 @@ def test_an_unphysical_frame_is_not_written(setup, tmp_path, value, words):
     recipe, frames = setup
 
     class Bad(FakeRec):
-        def reconstruct(self, frame):
-            r = super().reconstruct(frame)
-            r.ri[0, 0, 0] = value
-            return r
+        def volume(self, frame):
+            v = super().volume(frame)
+            v[0, 0, 0] = value
+            return v
 
     out = tmp_path / "s.zarr"
-    with pytest.raises(SsdpcError, match=f"frame 0: .*{words}"):
-        reconstruct_series(frames, out, recipe, rec=Bad(), progress=False)
+    with pytest.raises(SsdpcError, match=f"array frame 0 .*{words}"):
+        run(recipe, frames, out, rec=Bad())
     assert list(done_frames(out)) == [] and np.isnan(read_complete(out, "ri")).all()
 
 

@@ -11,7 +11,8 @@ from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.reconstruction import backend
 from napari_ssdpc.reconstruction.backend import get_backend, gpu_available
 from napari_ssdpc.reconstruction.deconvolution import Band, MultiViewRL
-from napari_ssdpc.reconstruction.pipeline import Reconstructor
+from napari_ssdpc.reconstruction.reconstructor import Reconstructor
+from napari_ssdpc.settings.config import RunConfig
 from napari_ssdpc.settings.optics import Optics
 
 needs_gpu = pytest.mark.skipif(not gpu_available(), reason="needs CuPy and a CUDA GPU")
@@ -43,7 +44,7 @@ def test_gpu_without_cupy_names_the_install(monkeypatch):
     assert not gpu_available()
     # the Reconstructor asks for its backend first: no operators are built for nothing
     with pytest.raises(SsdpcError, match="needs CuPy"):
-        Reconstructor(Optics.paper(), None, device="gpu")
+        Reconstructor(RunConfig.of(Optics.paper(), device="gpu"), None)
 
 
 def test_gpu_with_cupy_but_no_device(monkeypatch):
@@ -150,8 +151,8 @@ def test_the_fake_device_keeps_cupys_rules():
 
 def _tv_on(device):
     from napari_ssdpc.physics import transfer
-    from napari_ssdpc.reconstruction.forward import ViewModel
-    from napari_ssdpc.reconstruction.regularised import TvInversion, padded_planes
+    from napari_ssdpc.reconstruction.forward import ViewModel, padded_planes
+    from napari_ssdpc.reconstruction.regularised import TvInversion
     from napari_ssdpc.reconstruction.wotf import WotfInversion
 
     optics = Optics.paper().replace(condenser_na=0.3)

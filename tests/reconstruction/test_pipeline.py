@@ -5,11 +5,11 @@ import pytest
 import tifffile
 
 from napari_ssdpc.cli.main import main
-from napari_ssdpc.errors import SsdpcError, SsdpcWarning
-from napari_ssdpc.reconstruction.pipeline import Cancelled, Reconstructor, z_grid
+from napari_ssdpc.errors import Cancelled, SsdpcError, SsdpcWarning
+from napari_ssdpc.reconstruction.reconstructor import Reconstructor, z_grid
 from napari_ssdpc.simulation import phantoms
 from napari_ssdpc.validation import metrics as an
-from napari_ssdpc.validation.cases import simulate_case, truth_volume
+from napari_ssdpc.validation.cases import run_config, simulate_case, truth_volume
 
 BEAD = phantoms.Sphere((4.0, -3.0, 0.0), 6.0, 1.528, medium_index=1.518)  # weak: 0.7 rad through the centre
 
@@ -23,14 +23,15 @@ def case(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def calibration(case):
-    from napari_ssdpc.calibration.calibrate import calibrate
+    from napari_ssdpc.calibration import calibrate
 
     return calibrate(case.white, case.optics)
 
 
 @pytest.fixture(scope="module")
 def reconstructor(case, calibration):
-    return Reconstructor(case.optics, calibration, z=(-30, 30), dz=2, iterations=8, flat=case.flat, stacks=True)
+    config = run_config(case.optics, z=(-30, 30), dz=2, rl={"iterations": 8})
+    return Reconstructor(config, calibration, flat=case.flat, stacks=True)
 
 
 @pytest.fixture(scope="module")
@@ -70,7 +71,8 @@ def test_result_has_coordinates_and_all_outputs(result, reconstructor):
 
 
 def test_paper_route_finds_the_bead_with_the_right_sign(case, calibration):
-    rec = Reconstructor(case.optics, calibration, z=(-30, 30), dz=2, iterations=8, flat=case.flat, method="rl")
+    config = run_config(case.optics, z=(-30, 30), dz=2, rl={"iterations": 8}, method="rl")
+    rec = Reconstructor(config, calibration, flat=case.flat)
     res = rec.reconstruct(case.frame)
     truth = truth_volume(BEAD, res, 1.518, blur_um=(40.0, 3.9))
     assert an.correlation(res.delta_n, truth) > 0.5
@@ -104,10 +106,14 @@ def test_bad_frames(case, reconstructor):
 def test_bad_settings(case, calibration):
     with pytest.raises(SsdpcError, match="dz must be > 0"):
         z_grid(-10, 10, 0)
-    with pytest.raises(SsdpcError, match="iterations must be >= 1"):
-        Reconstructor(case.optics, calibration, z=(-10, 10), dz=2, iterations=0, flat=case.flat)
+    with pytest.raises(SsdpcError, match="'rl.iterations' must be positive"):
+        run_config(case.optics, z=(-10, 10), dz=2, rl={"iterations": 0})
     with pytest.warns(SsdpcWarning, match="beyond the depth of field"):
-        Reconstructor(case.optics, calibration, z=(-200, -190), dz=5, flat=case.flat, stacks=False)
+        Reconstructor(run_config(case.optics, z=(-200, -190), dz=5), calibration, flat=case.flat)
+    with pytest.raises(SsdpcError, match="takes a RunConfig"):
+        Reconstructor(case.optics, calibration)
+    with pytest.raises(SsdpcError, match="takes a Calibration"):
+        Reconstructor(run_config(case.optics), "calibration.json")
 
 
 def test_cli_reconstruct_writes_ome_tiff_and_keeps_outputs_on_error(case, calibration, tmp_path, capsys):
@@ -140,7 +146,7 @@ def test_cli_reconstruct_writes_ome_tiff_and_keeps_outputs_on_error(case, calibr
     capsys.readouterr()
     for bad, words in (
         (["--dz", "0"], "'dz_um' must be positive"),
-        (["--iterations", "0"], "rl_iterations' must be positive"),
+        (["--iterations", "0"], "'rl.iterations' must be positive"),
     ):
         assert main(args + bad + ["-o", str(out)]) == 2
         err = capsys.readouterr().err
@@ -161,10 +167,9 @@ def test_every_method_runs_on_a_device_backend(case, calibration, result):
     what runs on a GPU is the same code."""
     from fake_device import fake_gpu
 
-    rec = Reconstructor(
-        case.optics, calibration, z=(-30, 30), dz=2, iterations=8, flat=case.flat, stacks=True, device=fake_gpu()
-    )
-    assert rec.backend.is_gpu and rec.tv.model.bk is rec.backend
+    config = run_config(case.optics, z=(-30, 30), dz=2, rl={"iterations": 8})
+    rec = Reconstructor(config, calibration, flat=case.flat, stacks=True, backend=fake_gpu())
+    assert rec.backend.is_gpu and rec.method.tv.model.bk is rec.backend
     dev = rec.reconstruct(case.frame)
     assert dev.settings["method"] == result.settings["method"] == "tv"
     assert isinstance(dev.delta_n, np.ndarray) and isinstance(dev.stacks["up"], np.ndarray)

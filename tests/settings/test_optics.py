@@ -191,9 +191,13 @@ def test_run_config_round_trip_and_optics_file_with_reconstruction(tmp_path, pap
         ({"tikhonov_alpha": float("inf")}, "finite"),
         ({"rl_iterations": None}, "must be a whole number"),
         ({"method": "magic"}, "must be 'tv', 'wotf' or 'rl'"),
-        ({"dn_max": 0.0}, "'dn_max' must be positive"),
-        ({"tv_lambda": -1.0}, "'tv_lambda' must be positive"),
+        ({"dn_max": 0.0}, "'tv.dn_max' must be positive"),
+        ({"tv_lambda": -1.0}, "'tv.lambda_scale' must be positive"),
         ({"sign": "positive"}, "must be 'auto', 'denser', 'lighter' or 'any'"),
+        ({"tv": {"iterations": 0}}, "'tv.iterations' must be positive"),
+        ({"wotf": {"alpha": 0.0}}, "'wotf.alpha' must be positive"),
+        ({"rl": {"model": "exact"}}, "'rl.model' must be 'lenslet' or 'paper'"),
+        ({"tv": {"lambda": 1.0}}, "unknown key 'tv.lambda'"),
     ],
 )
 def test_reconstruction_settings_refuse_impossible_values(changes, words):
@@ -202,6 +206,21 @@ def test_reconstruction_settings_refuse_impossible_values(changes, words):
     with pytest.raises(SsdpcError) as e:
         ReconstructionSettings.from_dict(changes, source="run.yaml")
     assert words in str(e.value) and "\n" not in str(e.value)
+
+
+def test_each_method_reads_its_own_section_and_older_flat_keys_are_read_into_them():
+    from napari_ssdpc.settings import ReconstructionSettings
+
+    rec = ReconstructionSettings.from_dict({"method": "wotf", "wotf": {"alpha": 0.5}, "tv": {"sign": "lighter"}})
+    assert rec.alpha == 0.5 and rec.section is rec.wotf and rec.tv.sign == "lighter" and rec.rl.alpha == 0.01
+    old = {"method": "rl", "tikhonov_alpha": 0.02, "rl_iterations": 7, "model": "paper", "tv_iterations": 30}
+    rec = ReconstructionSettings.from_dict(old)
+    assert (rec.rl.alpha, rec.rl.iterations, rec.rl.model, rec.tv.iterations) == (0.02, 7, "paper", 30)
+    assert rec.tv.alpha == 0.1  # the other methods keep their own defaults
+    assert ReconstructionSettings.from_dict(rec.to_dict()) == rec
+    # runtime keys (read at every solve) do not change the operators' key
+    assert rec.with_section("tv", sign="denser", iterations=5).operator_key() == rec.operator_key()
+    assert rec.with_section("rl", model="lenslet").operator_key() != rec.operator_key()
 
 
 def test_hex_array_lenslets_have_six_neighbours_at_one_pitch():

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from napari_ssdpc.cli.main import main
-from napari_ssdpc.reconstruction.pipeline import Reconstructor
+from napari_ssdpc.reconstruction.reconstructor import Reconstructor
 from napari_ssdpc.validation.bench import run_bench
 from napari_ssdpc.validation.bench_report import format_report
-from napari_ssdpc.validation.cases import Case
+from napari_ssdpc.validation.cases import Case, run_config
 from napari_ssdpc.validation.reference import layout, max_relative_difference, reconstruct_reference
 
 
@@ -32,24 +32,25 @@ def _check_equal(rec, frame, canvas):
 
 def test_reference_path_equals_fast_path_on_the_ei_box(data):
     optics, cal, flat, frames, _ = data
-    rec = Reconstructor(optics, cal, z=(-40, 40), dz=10, iterations=4, flat=flat, method="rl")
+    rec = Reconstructor(run_config(optics, z=(-40, 40), dz=10, rl={"iterations": 4}, method="rl"), cal, flat=flat)
     ref = _check_equal(rec, frames[0], "eis")
     assert ref.layout.area_ratio > 4  # four 2x2-spread windows and their margins
 
 
 def test_reference_path_on_the_whole_sensor(data):
     optics, cal, flat, frames, _ = data
-    rec = Reconstructor(optics, cal, z=(-20, 20), dz=20, iterations=2, flat=flat, method="rl")
+    rec = Reconstructor(run_config(optics, z=(-20, 20), dz=20, rl={"iterations": 2}, method="rl"), cal, flat=flat)
     ref = _check_equal(rec, frames[1], "sensor")
     assert ref.layout.shape == tuple(cal.frame_shape)
 
 
 def test_spread_layout_keeps_every_kernel_and_separates_the_eis(data):
     optics, cal, flat, _, _ = data
-    rec = Reconstructor(optics, cal, z=(-80, 80), dz=40, iterations=1, flat=flat, method="rl")
+    rec = Reconstructor(run_config(optics, z=(-80, 80), dz=40, rl={"iterations": 1}, method="rl"), cal, flat=flat)
+    psf = rec.stacks.psf
     lay = layout(rec, "eis")
-    shift = np.abs(rec.psf.tilt).max() * 80 / rec.pixel_um
-    assert min(lay.reach) >= rec.psf.support_px // 2 + shift  # the crop keeps the kernel support
+    shift = np.abs(psf.tilt).max() * 80 / rec.pixel_um
+    assert min(lay.reach) >= psf.support_px // 2 + shift  # the crop keeps the kernel support
     # light of one lenslet, from anywhere in the object domain, never reaches another lenslet's view
     import scipy.fft as sfft
 
@@ -74,7 +75,7 @@ def test_quick_bench_report(data):
     report = run_bench(quick=True, case=case, reference=False, high_na_case=False)
     st = report["stages"]
     assert set(st) == {"fast", "wotf", "tv", "series"}
-    assert report["case"]["planes"] == 11 and report["case"]["iterations"] == 3
+    assert report["case"]["planes"] == 11 and report["case"]["rl"]["iterations"] == 3
     assert st["fast"]["lit_lenslets"] == 4 and 0 < st["fast"]["band_fraction"] < 0.3
     assert st["series"]["frames"] == 3
     assert report["machine"]["cores"] >= 1 and report["targets"]["peak_memory_gb"] > 0

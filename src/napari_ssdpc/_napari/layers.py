@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from napari_ssdpc.reconstruction.outputs import display
+from napari_ssdpc.settings.outputs import display
 
 __all__ = ["PSF_STYLE", "is_map", "result_layer"]
 

@@ -16,7 +16,7 @@ import numpy as np
 from napari_ssdpc._napari.layers import is_map, result_layer
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.frames import TiffInfo, tiff_info
-from napari_ssdpc.reconstruction.outputs import QUANTITIES
+from napari_ssdpc.settings.outputs import QUANTITIES
 
 RESULT_FORMAT = "napari-ssdpc-result"
 RESULT_VERSION = 1

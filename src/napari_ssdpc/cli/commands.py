@@ -16,11 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from napari_ssdpc._version import SOFTWARE
-from napari_ssdpc.cli import checks
 from napari_ssdpc.cli.options import run_config
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.paths import check_outputs, is_ours, writable_folder
-from napari_ssdpc.reconstruction import outputs
+from napari_ssdpc.settings.outputs import QUANTITIES
 
 __all__ = [
     "PHANTOMS",
@@ -65,7 +64,7 @@ def cmd_calibrate(args):
     args : argparse.Namespace
         The parsed options of `ssdpc calibrate` (see ``ssdpc calibrate --help``).
     """
-    from napari_ssdpc.calibration.calibrate import calibrate, overlay_png
+    from napari_ssdpc.calibration import calibrate, overlay_png
     from napari_ssdpc.io.frames import read_frame
 
     out = Path(args.output)
@@ -207,9 +206,7 @@ def output_paths(out: Path, names) -> dict:
     dict of str to Path
     """
     stem = out.name[: -len(".ome.tif")] if out.name.endswith(".ome.tif") else out.stem
-    return {
-        n: out if n == "ri" else out.with_name(f"{stem}{outputs.QUANTITIES[n].file_suffix()}.ome.tif") for n in names
-    }
+    return {n: out if n == "ri" else out.with_name(f"{stem}{QUANTITIES[n].file_suffix()}.ome.tif") for n in names}
 
 
 def cmd_reconstruct(args):
@@ -220,15 +217,17 @@ def cmd_reconstruct(args):
     args : argparse.Namespace
         The parsed options of `ssdpc reconstruct` (see ``ssdpc reconstruct --help``).
     """
-    from napari_ssdpc.calibration.calibrate import Calibration
+    from napari_ssdpc.calibration.result import Calibration
     from napari_ssdpc.io.frame_source import FrameSource
-    from napari_ssdpc.io.frames import read_frame, write_ome_tiffs
-    from napari_ssdpc.io.series import Recipe
+    from napari_ssdpc.io.frames import read_frame
+    from napari_ssdpc.pipeline.job import Job
+    from napari_ssdpc.pipeline.run import Pipeline
+    from napari_ssdpc.pipeline.sinks import OmeTiffSink, ZarrSink
     from napari_ssdpc.progress import tqdm_callback
+    from napari_ssdpc.settings.outputs import parse_save
 
     out = Path(args.output)
     is_zarr = out.suffix == ".zarr"
-    save = outputs.parse_save(args.save)
     inputs = {
         "raw frame": args.raw,
         "calibration": args.calibration,
@@ -236,6 +235,7 @@ def cmd_reconstruct(args):
         "optics file": args.optics,
         "settings file": args.config,
     }
+    save = parse_save(args.save)  # the paths first: --save may add files beside the output
     paths = output_paths(out, ["ri", *save])
     check_outputs(
         {("output" if n == "ri" else f"{n} output"): p for n, p in paths.items()},
@@ -250,69 +250,35 @@ def cmd_reconstruct(args):
     if distributed and not is_zarr:
         raise SsdpcError("--workers/--scheduler spread the frames of a time series; write it to OME-Zarr (-o OUT.zarr)")
     cal = Calibration.from_json(args.calibration)
-    if args.optics is not None:
-        optics = _optics(args.optics)
-    elif args.config is None:
-        optics = cal.optics
-    else:
-        optics = None  # the configuration's
+    optics = _optics(args.optics) if args.optics is not None else (cal.optics if args.config is None else None)
     cfg = run_config(args, optics)
-    optics = cfg.optics
-    checks.check_optics_match(optics, cal, "--optics" if args.optics else "--config" if args.config else "calibration")
-    stacks = any(outputs.QUANTITIES[s].needs_stacks for s in save)
-    checks.check_memory(optics, cal, cfg.reconstruction, stacks)
-    source = FrameSource(args.raw) if is_zarr else None  # a series streams, frame by frame
-    frames = None if is_zarr else read_frame(args.raw)
-    if frames is not None and frames.ndim == 3 and len(frames) > 1:
-        raise SsdpcError(f"{args.raw} holds {len(frames)} frames; write a time series to OME-Zarr (-o OUT.zarr)")
+    source = FrameSource(args.raw if is_zarr else read_frame(args.raw))  # a series streams, frame by frame
     flat = read_frame(args.flat, allow_series=False, name="flat frame") if args.flat else None
-    if flat is not None:
-        checks.check_flat(flat, optics, cal)
-    recipe = Recipe(optics, cal, dict(settings=cfg.reconstruction, stacks=stacks), flat)
     meta = {
         "software": SOFTWARE,
-        "optics": optics.to_dict(),
+        "optics": cfg.optics.to_dict(),
         "calibration": {k: v for k, v in cal.to_dict().items() if k != "lenslets"},
     }
-    rec = None
-    if not distributed:
-        with tqdm_callback("building operators", unit="plane") as cb:
-            rec = recipe.build(progress=cb)
-        meta["settings"] = rec.settings()
+    sink = ZarrSink(out, cfg.outputs.save, meta) if is_zarr else OmeTiffSink(paths, meta)
+    if not is_zarr and len(source) > 1:
+        raise SsdpcError(f"{args.raw} holds {len(source)} frames; write a time series to OME-Zarr (-o OUT.zarr)")
+    with tqdm_callback("building operators", unit="plane", disable=distributed) as cb:
+        pipeline = Pipeline(Job(cfg, cal, flat), progress=cb, workers=args.workers, scheduler=args.scheduler)
     if is_zarr:
-        if rec is not None:
-            checks.check_frame_light(source[0], rec, name=f"{args.raw} frame 0")
-        _reconstruct_series(source, recipe, rec, out, save, meta, args)
+        _report_series(pipeline.run(source, sink), out, cfg.outputs.save)
         return
-    frame = frames if frames.ndim == 2 else frames[0]
-    checks.check_frame_light(frame, rec, name=str(args.raw))
     with tqdm_callback("reconstructing", unit="iteration") as cb:
-        result = rec.reconstruct(frame, progress=cb)
-    checks.check_result(result.delta_n, optics)
-    voxel = (rec.dz, *result.voxel_um[1:])  # dz of the settings, also for a single plane
-    images = outputs.images(result, save)
-    write_ome_tiffs(
-        {
-            paths[name]: (data, axes, voxel, {**meta, "quantity": what, "z_um": result.z_um.tolist()})
-            for name, (data, axes, what) in images.items()
-        }
-    )
-    print(f"wrote {', '.join(str(paths[n]) for n in images)}")
-    dn = result.delta_n
+        pipeline.run(source, sink, iteration_progress=cb, progress=False)
+    print(f"wrote {', '.join(str(p) for p in sink.written)}")
+    res = sink.result
+    dn, voxel = res.delta_n, res.voxel_um
     print(
         f"volume {dn.shape} (z, y, x), voxel {voxel[0]:g} x {voxel[1]:.4f} x {voxel[2]:.4f} µm; "
         f"delta n from {dn.min():+.4f} to {dn.max():+.4f}"
     )
 
 
-def _reconstruct_series(source, recipe, rec, out, save, meta, args):
-    """Frames streamed into (t, z, y, x) OME-Zarr images, one chunk per frame; resumable; on a
-    Dask cluster with --workers/--scheduler (io/series.py)."""
-    from napari_ssdpc.io.series import reconstruct_series
-
-    report = reconstruct_series(
-        source, out, recipe, save=save, meta=meta, workers=args.workers, scheduler=args.scheduler, rec=rec
-    )
+def _report_series(report, out, save):
     names = ", ".join(["ri", *save])
     if report.written == 0:
         print(f"{out}: all {report.frames} frames were already written ({names})")

@@ -24,7 +24,6 @@ from napari_ssdpc.cli.commands import (
 )
 from napari_ssdpc.cli.options import add_reconstruction_options
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
-from napari_ssdpc.reconstruction import outputs
 
 __all__ = ["build_parser", "main"]
 
@@ -105,7 +104,6 @@ def build_parser():
     s.add_argument("--calibration", required=True, help="calibration JSON from `ssdpc calibrate`")
     s.add_argument("--flat", help="flat frame (no sample, same condenser NA) for flat-fielding")
     add_reconstruction_options(s)
-    s.add_argument("--save", help=f"extra outputs, comma separated: {','.join(outputs.SAVE_CHOICES)}")
     s.add_argument(
         "-o", "--output", required=True, help="OUT.ome.tif (one frame) or OUT.zarr (time series; a rerun resumes it)"
     )

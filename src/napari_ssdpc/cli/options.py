@@ -2,7 +2,8 @@
 
 Each option of ``ssdpc reconstruct`` that sets a reconstruction setting takes its type, its
 choices, its help text and its default from the field of
-:class:`~napari_ssdpc.settings.ReconstructionSettings`, so the CLI never types them again.
+:class:`~napari_ssdpc.settings.reconstruction.ReconstructionSettings` (or of a method's section),
+and the methods' descriptions from the registry, so the CLI never types them again.
 """
 
 from __future__ import annotations
@@ -10,22 +11,28 @@ from __future__ import annotations
 import argparse
 import typing
 
-from napari_ssdpc.settings import ReconstructionSettings, RunConfig
+from pydantic import BaseModel
+
+from napari_ssdpc.reconstruction.methods import METHODS
+from napari_ssdpc.settings.config import RunConfig
 from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.settings.outputs import SAVE_CHOICES, OutputSettings
+from napari_ssdpc.settings.reconstruction import DEFAULT_Z_UM, ReconstructionSettings
 
 __all__ = ["FLAGS", "add_reconstruction_options", "run_config"]
 
-#: CLI flag -> settings field (``--z`` sets the pair z_min_um, z_max_um).
+#: CLI flag -> settings key; "section.key" for a method's section (``--z`` sets the pair
+#: z_min_um, z_max_um; ``--alpha`` the chosen method's alpha; ``--save`` the outputs).
 FLAGS = {
     "dz": "dz_um",
     "method": "method",
-    "model": "model",
-    "iterations": "rl_iterations",
-    "alpha": "tikhonov_alpha",
-    "sign": "sign",
-    "dn-max": "dn_max",
-    "tv-lambda": "tv_lambda",
-    "tv-iterations": "tv_iterations",
+    "model": "rl.model",
+    "iterations": "rl.iterations",
+    "alpha": "*.alpha",
+    "sign": "tv.sign",
+    "dn-max": "tv.dn_max",
+    "tv-lambda": "tv.lambda_scale",
+    "tv-iterations": "tv.iterations",
     "refraction-increment": "refraction_increment_um3_pg",
     "device": "device",
 }
@@ -36,11 +43,23 @@ def _dest(flag: str) -> str:
     return flag.replace("-", "_")
 
 
-def _help(field: str) -> str:
-    info = ReconstructionSettings.model_fields[field]
-    default = info.default
-    shown = "the method's default" if default is None else default
-    return f"{info.description} (default {shown})"
+def _field(key: str):
+    """The pydantic field behind a settings key ('*' : the default method's section)."""
+    section, _, name = key.rpartition(".")
+    model: type[BaseModel] = ReconstructionSettings
+    if section:
+        section = ReconstructionSettings().method if section == "*" else section
+        model = typing.cast(type[BaseModel], ReconstructionSettings.model_fields[section].annotation)
+    return model.model_fields[name]
+
+
+def _help(key: str) -> str:
+    info = _field(key)
+    if key == "*.alpha":
+        return "Tikhonov regularisation of the chosen method (default: the method's, tv/wotf 0.1, rl 0.01)"
+    method = key.split(".")[0] if "." in key else ""
+    where = f" ('{method}')" if method else ""
+    return f"{info.description}{where} (default {info.default})"
 
 
 def add_reconstruction_options(parser: argparse.ArgumentParser) -> None:
@@ -49,26 +68,30 @@ def add_reconstruction_options(parser: argparse.ArgumentParser) -> None:
     Parameters
     ----------
     parser : argparse.ArgumentParser
-        The ``reconstruct`` (or ``bench``) sub-command's parser; choices, defaults and help come
-        from :class:`~napari_ssdpc.settings.reconstruction.ReconstructionSettings`.
+        The ``reconstruct`` sub-command's parser; choices, defaults and help come from
+        :class:`~napari_ssdpc.settings.reconstruction.ReconstructionSettings` and the method
+        registry.
     """
-    fields = ReconstructionSettings.model_fields
     parser.add_argument(
-        "--config", help="run configuration YAML (optics + reconstruction sections), e.g. saved by napari"
+        "--config", help="run configuration YAML (optics, reconstruction and outputs sections), e.g. saved by napari"
     )
+    z0, z1 = DEFAULT_Z_UM
     parser.add_argument(
         "--z",
         type=float,
         nargs=2,
         metavar=("ZMIN", "ZMAX"),
-        help=f"z range in µm, z > 0 farther from the objective (default {fields['z_min_um'].default:g} "
-        f"{fields['z_max_um'].default:g}), e.g. --z -40 40 or --z -1e2 1e2",
+        help=f"z range in µm, z > 0 farther from the objective (default {z0:g} {z1:g}), e.g. --z -40 40",
     )
-    for flag, name in FLAGS.items():
-        ann = fields[name].annotation
+    for flag, key in FLAGS.items():
+        ann = _field(key).annotation
         choices = typing.get_args(ann) if typing.get_origin(ann) is typing.Literal else None
         kind = int if ann is int else (str if choices else float)
-        parser.add_argument(f"--{flag}", type=kind, choices=choices, help=_help(name))
+        text = _help(key)
+        if flag == "method":
+            text = "phase method: " + "; ".join(f"{n}: {e.summary}" for n, e in METHODS.items()) + " (default tv)"
+        parser.add_argument(f"--{flag}", type=kind, choices=choices, help=text)
+    parser.add_argument("--save", help=f"extra outputs, comma separated: {','.join(SAVE_CHOICES)}")
 
 
 def run_config(args: argparse.Namespace, optics: Optics | None) -> RunConfig:
@@ -86,9 +109,21 @@ def run_config(args: argparse.Namespace, optics: Optics | None) -> RunConfig:
     RunConfig
     """
     cfg = RunConfig.from_yaml(args.config) if getattr(args, "config", None) else RunConfig()
-    given = {name: getattr(args, _dest(flag), None) for flag, name in FLAGS.items()}
-    changes = {name: value for name, value in given.items() if value is not None}
+    data = cfg.reconstruction.to_dict()
+    method = getattr(args, "method", None) or data["method"]
+    for flag, key in FLAGS.items():
+        value = getattr(args, _dest(flag), None)
+        if value is None:
+            continue
+        section, _, name = key.rpartition(".")
+        if section:
+            section = method if section == "*" else section
+            data[section] = {**data[section], name: value}
+        else:
+            data[name] = value
     if getattr(args, "z", None) is not None:
-        changes.update(z_min_um=float(args.z[0]), z_max_um=float(args.z[1]))
-    rec = ReconstructionSettings.from_dict({**cfg.reconstruction.to_dict(), **changes}, source="command line")
-    return RunConfig(optics=optics or cfg.optics, reconstruction=rec)
+        data.update(z_min_um=float(args.z[0]), z_max_um=float(args.z[1]))
+    rec = ReconstructionSettings.from_dict(data, source="command line")
+    save = getattr(args, "save", None)
+    outputs = cfg.outputs if save is None else OutputSettings.from_dict({"save": save}, source="--save")
+    return RunConfig(optics=optics or cfg.optics, reconstruction=rec, outputs=outputs)

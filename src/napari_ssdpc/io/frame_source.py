@@ -94,6 +94,28 @@ class FrameSource:
     def __len__(self) -> int:
         return self.shape[0]
 
+    @property
+    def frame_shape(self) -> tuple[int, int]:
+        """(H, W) of a frame, px."""
+        return (self.shape[1], self.shape[2])
+
+    def available(self) -> int:
+        """Every frame of a file or an array can be read now."""
+        return self.shape[0]
+
+    def finished(self) -> bool:
+        """A file or an array holds all its frames."""
+        return True
+
+    def wait(self, timeout_s: float) -> None:
+        """Nothing to wait for: every frame is there.
+
+        Parameters
+        ----------
+        timeout_s : float
+            Unused (the protocol's longest wait, s).
+        """
+
     def __getitem__(self, t) -> np.ndarray:
         if not 0 <= int(t) < self.shape[0]:
             raise IndexError(f"frame {t} of {self.shape[0]}")

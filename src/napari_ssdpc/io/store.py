@@ -26,7 +26,7 @@ import numpy as np
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.files import glob_escape, os_error, pid_alive
 
-__all__ = ["DONE", "STAMP", "StoreLock", "done_frames", "mask_incomplete", "open_store", "read_complete"]
+__all__ = ["DONE", "STAMP", "StoreLock", "done_frames", "mask_incomplete", "open_store", "read_complete", "write_frame"]
 
 DONE = "ssdpc_done"  # root array: 1 where a frame is completely written
 STAMP = "ssdpc_series"  # root attribute: what the store holds (input, settings, outputs)
@@ -212,6 +212,38 @@ def open_store(out, n_frames: int, layout: dict, voxel, stamp: dict, attrs: dict
     except OSError as e:
         raise os_error(e, out) from None
     return root[DONE]
+
+
+def write_frame(out, t: int, images: dict) -> float:
+    """Write one frame's images into the store, then mark the frame done.
+
+    Parameters
+    ----------
+    out : str or Path
+        The store (made by :func:`open_store`).
+    t : int
+        Frame index.
+    images : dict
+        {name: (array, axes, description)} of one frame, as ``Result.images`` gives them.
+
+    Returns
+    -------
+    float
+        Seconds spent writing.
+    """
+    import time
+
+    import zarr
+
+    t0 = time.perf_counter()
+    try:
+        root = zarr.open_group(str(out), mode="r+")
+        for name, (data, _, _) in images.items():
+            root[name]["0"][t] = data
+        root[DONE][t] = 1  # only after every chunk of the frame is on disk
+    except OSError as e:
+        raise os_error(e, Path(out)) from None
+    return time.perf_counter() - t0
 
 
 def done_frames(out) -> np.ndarray:

@@ -43,12 +43,12 @@ import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.reconstruction.backend import in_threads
-from napari_ssdpc.reconstruction.forward import ViewModel, apply, padded_planes
+from napari_ssdpc.reconstruction.forward import ViewModel, apply
 from napari_ssdpc.reconstruction.tv_report import TvReport
+from napari_ssdpc.settings.reconstruction import SIGNS
 
-__all__ = ["LAMBDA_PER_NOISE", "SIGNS", "TvInversion", "TvReport", "padded_planes"]
+__all__ = ["LAMBDA_PER_NOISE", "TvInversion", "TvReport"]
 
-SIGNS = ("auto", "denser", "lighter", "any")
 #: ℓ of the sparsity term μ‖φ‖₁ with μ = λ/ℓ, in units of the axial resolution R_z: without it a
 #: constant offset inside the field stop (the unmeasured slice mean) costs only its boundary.
 #: Measured (docs/validation.md): 0.5 R_z leaves a haze of noise that the sign constraint keeps

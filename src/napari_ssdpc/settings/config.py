@@ -1,10 +1,12 @@
-"""A run configuration: the instrument and the reconstruction settings in one YAML file.
+"""A run configuration: the instrument, the reconstruction settings and the outputs in one object.
 
-``ssdpc reconstruct --config run.yaml`` reads it, and the napari dock's "Save settings" writes
-it::
+It is the one object the CLI, napari, the series runner and the Python API hand down to the
+solver; each part reads its own section. ``ssdpc reconstruct --config run.yaml`` reads it, and
+the napari dock's "Save settings" writes it::
 
     optics: {...}            # the optics schema (docs/paper-optics.yaml)
-    reconstruction: {...}    # ReconstructionSettings
+    reconstruction: {...}    # ReconstructionSettings, with one section per phase method
+    outputs: {save: [...]}   # OutputSettings: quantities written beside RI
 
 An optics file with a ``reconstruction:`` section reads as a run configuration too.
 """
@@ -20,18 +22,61 @@ from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.settings.base import SettingsModel
 from napari_ssdpc.settings.files import read_mapping
 from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.settings.outputs import OutputSettings
 from napari_ssdpc.settings.reconstruction import ReconstructionSettings
 
 __all__ = ["RunConfig"]
 
 
 class RunConfig(SettingsModel):
-    """The instrument and how to reconstruct."""
+    """The instrument, how to reconstruct and what to write."""
 
     optics: Optics = Field(default_factory=Optics.paper, description="the instrument")
     reconstruction: ReconstructionSettings = Field(
         default_factory=ReconstructionSettings, description="how to reconstruct"
     )
+    outputs: OutputSettings = Field(default_factory=OutputSettings, description="what to write beside RI")
+
+    @classmethod
+    def of(cls, optics: Optics, reconstruction: ReconstructionSettings | None = None, **changes) -> RunConfig:
+        """A run configuration from optics and reconstruction settings (keys of it changed).
+
+        Parameters
+        ----------
+        optics : Optics
+        reconstruction : ReconstructionSettings, optional
+            Default: the defaults.
+        **changes
+            Reconstruction keys to change (``z_min_um``, ``method``, ``tv={...}``, ...), and
+            ``save`` (quantities beside RI).
+
+        Returns
+        -------
+        RunConfig
+        """
+        save = changes.pop("save", ())
+        rec = reconstruction or ReconstructionSettings()
+        if changes:
+            data = rec.to_dict()
+            for key, value in changes.items():
+                data[key] = {**data[key], **value} if isinstance(value, dict) else value
+            rec = ReconstructionSettings.from_dict(data, source="reconstruction settings")
+        return cls(optics=optics, reconstruction=rec, outputs=OutputSettings.from_dict({"save": list(save)}))
+
+    def replace_reconstruction(self, **changes) -> RunConfig:
+        """A copy with reconstruction keys changed (sections merged, as in :meth:`of`).
+
+        Parameters
+        ----------
+        **changes
+            Reconstruction keys, and ``save``.
+
+        Returns
+        -------
+        RunConfig
+        """
+        changes.setdefault("save", self.outputs.save)
+        return RunConfig.of(self.optics, self.reconstruction, **changes)
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> RunConfig:
@@ -54,10 +99,11 @@ class RunConfig(SettingsModel):
             raise SsdpcError(f"{path}: expected 'optics:' and 'reconstruction:' sections (a run configuration)")
         optics = Optics.from_dict(data.get("optics") or Optics.paper().to_dict(), source=f"{path} optics")
         rec = ReconstructionSettings.from_dict(data.get("reconstruction") or {}, source=f"{path} reconstruction")
-        extra = sorted(set(data) - {"optics", "reconstruction"})
+        outputs = OutputSettings.from_dict(data.get("outputs") or {}, source=f"{path} outputs")
+        extra = sorted(set(data) - {"optics", "reconstruction", "outputs"})
         if extra:
-            raise SsdpcError(f"{path}: unknown section '{extra[0]}' (valid: optics, reconstruction)")
-        return cls(optics=optics, reconstruction=rec)
+            raise SsdpcError(f"{path}: unknown section '{extra[0]}' (valid: optics, reconstruction, outputs)")
+        return cls(optics=optics, reconstruction=rec, outputs=outputs)
 
     def to_yaml(self, path: str | Path) -> Path:
         """Write the configuration as YAML (atomically).
@@ -74,7 +120,11 @@ class RunConfig(SettingsModel):
         from napari_ssdpc.files import atomic_write
 
         path = Path(path)
-        data = {"optics": self.optics.to_dict(), "reconstruction": self.reconstruction.to_dict()}
+        data = {
+            "optics": self.optics.to_dict(),
+            "reconstruction": self.reconstruction.to_dict(),
+            "outputs": self.outputs.to_dict(),
+        }
         with atomic_write(path) as tmp:
             Path(tmp).write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
         return path

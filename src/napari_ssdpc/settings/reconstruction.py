@@ -1,59 +1,163 @@
-"""Reconstruction settings: the z grid, the phase method and its parameters, the device.
+"""Reconstruction settings: the z grid, the phase method with its own section, the device.
 
-These are the user's choices for one run, apart from the instrument (:mod:`.optics`). The CLI
-builds its options, choices and help defaults from these fields, the napari dock builds its
-controls from them, and a run configuration file (:mod:`.config`) stores them.
+These are the user's choices for one run, apart from the instrument (:mod:`.optics`) and what
+is written (:mod:`.outputs`). Every phase method reads its own section: ``tv``, ``wotf`` or
+``rl`` (the methods of :mod:`napari_ssdpc.reconstruction.methods`)::
+
+    reconstruction:
+      z_min_um: -40
+      z_max_um: 40
+      dz_um: 1
+      method: tv
+      tv: {sign: auto, iterations: 60}
+      rl: {iterations: 15}
+
+The CLI builds its options, choices and help defaults from these fields, the napari dock builds
+its controls from them, and a run configuration file (:mod:`.config`) stores them. Files written
+before the sections existed (``tikhonov_alpha``, ``rl_iterations``, ``tv_lambda``, ... at the top
+level) are read into the sections.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Any, ClassVar, Literal, get_args
 
 from pydantic import Field, model_validator
 
 from napari_ssdpc.settings.base import SettingsModel, bounded
 
-__all__ = ["DEFAULT_ALPHA", "MAX_PLANES", "PHASE_METHODS", "SIGNS", "TRANSFER_MODELS", "ReconstructionSettings"]
+__all__ = [
+    "DEFAULT_Z_UM",
+    "MAX_PLANES",
+    "PHASE_METHODS",
+    "SIGNS",
+    "TRANSFER_MODELS",
+    "MethodName",
+    "ReconstructionSettings",
+    "RlSettings",
+    "Sign",
+    "TvSettings",
+    "WotfSettings",
+    "plane_count",
+]
 
-#: 'tv': 3D inversion of all views' defocused WOTFs with total variation, the sign of Δn, a bound
-#: and the field stop (ADMM); 'wotf': the same operators with Tikhonov (linear, fast); 'rl': the
-#: paper's route (Richardson-Lucy per half, DPC per slice, 2D Tikhonov with the DPC transfer function).
-PHASE_METHODS = ("tv", "wotf", "rl")
+#: The phase methods, in the order the CLI and napari list them (their solvers:
+#: :data:`napari_ssdpc.reconstruction.methods.METHODS`).
+MethodName = Literal["tv", "wotf", "rl"]
+PHASE_METHODS: tuple[str, ...] = get_args(MethodName)
 #: The sign of Δn against the medium: cells in water are denser, PMMA beads in oil lighter.
-SIGNS = ("auto", "denser", "lighter", "any")
-TRANSFER_MODELS = ("lenslet", "paper")
-#: Tikhonov alpha per method: 'rl' on the |H_DPC|² scale of paper Eq. 7, 'wotf' relative to the
-#: strongest view's |H|² summed over z (docs/validation.md).
-DEFAULT_ALPHA = {"tv": 0.1, "wotf": 0.1, "rl": 0.01}
+Sign = Literal["auto", "denser", "lighter", "any"]
+SIGNS: tuple[str, ...] = get_args(Sign)
+TransferModel = Literal["lenslet", "paper"]
+TRANSFER_MODELS: tuple[str, ...] = get_args(TransferModel)
+#: The default z range, µm from the focal plane.
+DEFAULT_Z_UM = (-80.0, 80.0)
 #: More planes than this is almost always a wrong unit or a typo in the z range.
 MAX_PLANES = 2001
 
 
-class ReconstructionSettings(SettingsModel):
-    """How to reconstruct: z range and spacing (µm), phase method, transfer model, iterations."""
+def plane_count(z_min_um: float, z_max_um: float, dz_um: float) -> int:
+    """Planes from z_min to z_max (inclusive) every dz µm: the one rule for the z grid.
 
-    z_min_um: float = bounded(-80.0, -5000.0, 5000.0, "first plane, µm from the focal plane (z > 0: farther)")
-    z_max_um: float = bounded(80.0, -5000.0, 5000.0, "last plane, µm from the focal plane")
+    Parameters
+    ----------
+    z_min_um, z_max_um : float
+        First and last plane, µm.
+    dz_um : float
+        Spacing, µm (> 0).
+
+    Returns
+    -------
+    int
+    """
+    return int(math.floor((z_max_um - z_min_um) / dz_um + 1e-6)) + 1
+
+
+def _alpha(default: float, scale: str) -> Any:
+    return bounded(default, 1e-8, 1e6, f"Tikhonov regularisation, relative to {scale}")
+
+
+class WotfSettings(SettingsModel):
+    """The 'wotf' method: 3D Tikhonov inversion of all views' weak-object transfer functions."""
+
+    #: Keys read at every solve: changing them keeps the built operators.
+    runtime: ClassVar[frozenset[str]] = frozenset()
+
+    alpha: float = _alpha(0.1, "the strongest frequency's Σ_k,z |A|² / K (docs/validation.md)")
+
+
+class TvSettings(SettingsModel):
+    """The 'tv' method: the same operators with total variation and the physical constraints."""
+
+    #: Keys read at every solve: changing them keeps the built operators.
+    runtime: ClassVar[frozenset[str]] = frozenset({"sign", "dn_max", "lambda_scale", "iterations"})
+
+    alpha: float = _alpha(0.1, "the strongest frequency's Σ_k,z |A|² / K: the Tikhonov start")
+    sign: Sign = Field("auto", description="sign of Δn against the medium; auto: the one the data support")
+    dn_max: float = bounded(0.3, 1e-3, 2.0, "largest |Δn| the sample may have")
+    lambda_scale: float | None = bounded(
+        None, 1e-3, 1e3, "TV weight relative to the noise-based choice; empty: automatic (1)"
+    )
+    iterations: int = bounded(60, 1, 2000, "most ADMM iterations")
+
+
+class RlSettings(SettingsModel):
+    """The 'rl' method (the paper's route) and the directional stacks every method can add."""
+
+    #: Keys read at every solve: changing them keeps the built operators.
+    runtime: ClassVar[frozenset[str]] = frozenset({"alpha", "iterations"})
+
+    alpha: float = _alpha(0.01, "the |H_DPC|² scale of paper Eq. 7")
+    iterations: int = bounded(15, 1, 500, "Richardson-Lucy iterations (the 'rl' method, DPC and stacks)")
+    model: TransferModel = Field("lenslet", description="DPC transfer-function model")
+
+
+#: Keys of files written before the method sections: flat key -> (section, key).
+_FLAT_KEYS = {
+    "rl_iterations": ("rl", "iterations"),
+    "model": ("rl", "model"),
+    "sign": ("tv", "sign"),
+    "dn_max": ("tv", "dn_max"),
+    "tv_lambda": ("tv", "lambda_scale"),
+    "tv_iterations": ("tv", "iterations"),
+}
+
+
+class ReconstructionSettings(SettingsModel):
+    """How to reconstruct: the z grid (µm), the phase method and its section, the device."""
+
+    #: Keys read at every frame: changing them keeps the built operators.
+    runtime: ClassVar[frozenset[str]] = frozenset({"refraction_increment_um3_pg"})
+
+    z_min_um: float = bounded(DEFAULT_Z_UM[0], -5000.0, 5000.0, "first plane, µm from the focal plane (z > 0: farther)")
+    z_max_um: float = bounded(DEFAULT_Z_UM[1], -5000.0, 5000.0, "last plane, µm from the focal plane")
     dz_um: float = bounded(1.0, 0.05, 100.0, "plane spacing, µm")
-    method: Literal["tv", "wotf", "rl"] = Field("tv", description="phase method (docs/validation.md compares them)")
-    model: Literal["lenslet", "paper"] = Field("lenslet", description="transfer-function model")
-    rl_iterations: int = bounded(15, 1, 500, "Richardson-Lucy iterations (the 'rl' method, DPC and stacks)")
-    tikhonov_alpha: float | None = bounded(
-        None, 1e-8, 1e6, "Tikhonov regularisation; empty: the method's default (wotf 0.1, rl 0.01)"
-    )
-    sign: Literal["auto", "denser", "lighter", "any"] = Field(
-        "auto", description="sign of Δn against the medium ('tv'); auto: the one the data support"
-    )
-    dn_max: float = bounded(0.3, 1e-3, 2.0, "largest |Δn| the sample may have ('tv')")
-    tv_lambda: float | None = bounded(
-        None, 1e-3, 1e3, "TV weight relative to the noise-based choice ('tv'); empty: automatic (1)"
-    )
-    tv_iterations: int = bounded(60, 1, 2000, "most ADMM iterations ('tv')")
+    method: MethodName = Field("tv", description="phase method (docs/validation.md compares them)")
     refraction_increment_um3_pg: float = bounded(
         0.19, 0.05, 0.5, "specific refraction increment for the dry mass, µm³/pg"
     )
     device: Literal["cpu", "gpu"] = Field("cpu", description="cpu (NumPy) or gpu (CuPy, napari-ssdpc[gpu])")
+    tv: TvSettings = Field(default_factory=TvSettings, description="the 'tv' method")
+    wotf: WotfSettings = Field(default_factory=WotfSettings, description="the 'wotf' method")
+    rl: RlSettings = Field(default_factory=RlSettings, description="the 'rl' method and the directional stacks")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _sections(cls, data: Any) -> Any:
+        """Read the flat keys of older files into the method sections."""
+        if not isinstance(data, dict) or not (set(data) & {*_FLAT_KEYS, "tikhonov_alpha"}):
+            return data
+        data = dict(data)
+        sections: dict[str, dict] = {s: dict(data.get(s) or {}) for s in ("tv", "wotf", "rl")}
+        for key, (section, name) in _FLAT_KEYS.items():
+            if key in data:
+                sections[section].setdefault(name, data.pop(key))
+        alpha = data.pop("tikhonov_alpha", None)
+        if alpha is not None:  # it was the chosen method's alpha
+            sections[str(data.get("method", "tv"))].setdefault("alpha", alpha)
+        data.update({s: v for s, v in sections.items() if v or s in data})
+        return data
 
     @model_validator(mode="after")
     def _z_grid(self) -> ReconstructionSettings:
@@ -61,7 +165,7 @@ class ReconstructionSettings(SettingsModel):
             raise ValueError(
                 f"z range is empty: z_max_um {self.z_max_um} < z_min_um {self.z_min_um}; give ZMIN <= ZMAX"
             )
-        planes = math.floor((self.z_max_um - self.z_min_um) / self.dz_um + 1e-6) + 1
+        planes = plane_count(self.z_min_um, self.z_max_um, self.dz_um)
         if planes > MAX_PLANES:
             raise ValueError(
                 f"{planes} planes from z {self.z_min_um:g} to {self.z_max_um:g} µm every {self.dz_um:g} µm "
@@ -70,6 +174,50 @@ class ReconstructionSettings(SettingsModel):
         return self
 
     @property
+    def planes(self) -> int:
+        """Planes of the z grid."""
+        return plane_count(self.z_min_um, self.z_max_um, self.dz_um)
+
+    @property
+    def section(self) -> WotfSettings | TvSettings | RlSettings:
+        """The chosen method's own section."""
+        section: WotfSettings | TvSettings | RlSettings = getattr(self, self.method)
+        return section
+
+    @property
     def alpha(self) -> float:
-        """The Tikhonov alpha in use: the given one, else the method's default."""
-        return DEFAULT_ALPHA[self.method] if self.tikhonov_alpha is None else self.tikhonov_alpha
+        """The chosen method's Tikhonov alpha."""
+        return float(self.section.alpha)
+
+    def operator_key(self) -> dict:
+        """The settings the operators are built from (the runtime keys of every section left out).
+
+        Returns
+        -------
+        dict
+            Two settings with equal keys can share one Reconstructor.
+        """
+        data = {k: v for k, v in self.to_dict().items() if k not in self.runtime}
+        for name in ("tv", "wotf", "rl"):
+            section = getattr(self, name)
+            data[name] = {k: v for k, v in data[name].items() if k not in section.runtime}
+        return data
+
+    def with_section(self, method: str | None = None, **changes: Any) -> ReconstructionSettings:
+        """A validated copy with keys of a method's section changed.
+
+        Parameters
+        ----------
+        method : str, optional
+            The section ('tv', 'wotf' or 'rl'); default the chosen method's.
+        **changes
+            Keys of that section.
+
+        Returns
+        -------
+        ReconstructionSettings
+        """
+        name = method or self.method
+        data = self.to_dict()
+        data[name] = {**data[name], **changes}
+        return type(self).from_dict(data, source=f"{name} settings")

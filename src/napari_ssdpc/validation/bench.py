@@ -24,10 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-STANDARD = {"z": (-80.0, 80.0), "dz": 1.0, "iterations": 10, "method": "rl"}
-QUICK = {"z": (-80.0, 80.0), "dz": 16.0, "iterations": 3, "method": "rl"}
+STANDARD = {"z": (-80.0, 80.0), "dz": 1.0, "rl": {"iterations": 10}, "method": "rl"}
+QUICK = {"z": (-80.0, 80.0), "dz": 16.0, "rl": {"iterations": 3}, "method": "rl"}
 #: the regularised method's standard case: 121 planes at condenser NA 0.25 (16 lit lenslets)
-TV_CASE = {"z": (-60.0, 60.0), "dz": 1.0, "iterations": 10, "method": "tv"}
+TV_CASE = {"z": (-60.0, 60.0), "dz": 1.0, "rl": {"iterations": 10}, "method": "tv"}
 TV_NA = 0.25
 SENSOR_DZ = {False: 20.0, True: 80.0}  # planes of the sensor-canvas reference (it is slow)
 SERIES_FRAMES = {False: 4, True: 3}
@@ -163,7 +163,7 @@ def fast_path(case, cal, cfg, device="cpu", stacks=True, repeats=2):
     case : Case
     cal : Calibration
     cfg : dict
-        Reconstructor keywords (z, dz, iterations, method).
+        z range, dz and reconstruction keys (see :func:`~napari_ssdpc.validation.cases.run_config`).
     device : {'cpu', 'gpu'}
     stacks : bool
         Build the Richardson-Lucy operators too.
@@ -179,10 +179,11 @@ def fast_path(case, cal, cfg, device="cpu", stacks=True, repeats=2):
         Build, first-frame and frame times and the stage timings (s), lit lenslets, planes,
         peak RSS (MB).
     """
-    from napari_ssdpc.reconstruction.pipeline import Reconstructor
+    from napari_ssdpc.reconstruction.reconstructor import Reconstructor
+    from napari_ssdpc.validation.cases import run_config
 
     t0 = time.perf_counter()
-    rec = Reconstructor(case.optics, cal, flat=case.flat, device=device, stacks=stacks, **cfg)
+    rec = Reconstructor(run_config(case.optics, device=device, **cfg), cal, flat=case.flat, stacks=stacks)
     build = time.perf_counter() - t0
     frame = case.frame if case.frame.ndim == 2 else case.frame[0]
     times, res = _frame_times(rec, frame, repeats)
@@ -193,8 +194,8 @@ def fast_path(case, cal, cfg, device="cpu", stacks=True, repeats=2):
         "planes": len(rec.z_um),
         "peak_rss_mb": peak_rss_mb(),
     }
-    if hasattr(rec, "rl"):
-        info.update(fft_shape=list(rec.fft_shape), band_fraction=rec.band.fraction)
+    if rec.stacks is not None:
+        info.update(fft_shape=list(rec.stacks.fft_shape), band_fraction=rec.stacks.band.fraction)
     return rec, res, info
 
 
@@ -221,17 +222,20 @@ def series_stage(case, cal, cfg, device, n_frames, rec=None) -> dict:
     """
     import tifffile
 
-    from napari_ssdpc.io.series import Recipe, reconstruct_series
+    from napari_ssdpc.pipeline.job import Job
+    from napari_ssdpc.pipeline.run import Pipeline
+    from napari_ssdpc.pipeline.sinks import ZarrSink
+    from napari_ssdpc.validation.cases import run_config
 
     frames = case.frame if case.frame.ndim == 3 else np.stack([case.frame] * n_frames)
-    recipe = Recipe(case.optics, cal, {**cfg, "device": device, "stacks": True}, case.flat)
+    job = Job(run_config(case.optics, device=device, **cfg), cal, case.flat, stacks=True)
     with tempfile.TemporaryDirectory(prefix="ssdpc-bench-") as tmp:
         src = Path(tmp) / "series.tif"
         tifffile.imwrite(src, frames, photometric="minisblack")
         t0 = time.perf_counter()
-        rec = recipe.build() if rec is None else rec
+        pipeline = Pipeline(job, reconstructor=rec)
         build = time.perf_counter() - t0
-        rep = reconstruct_series(src, Path(tmp) / "out.zarr", recipe, rec=rec, progress=False)
+        rep = pipeline.run(src, ZarrSink(Path(tmp) / "out.zarr"), progress=False)
     steady = rep.timings[1:] or rep.timings  # the first frame pays for the FFT plans
     mean = {k: float(np.mean([t[k] for t in steady])) for k in ("read_s", "reconstruct_s", "write_s")}
     wall = sum(t["read_s"] + t["reconstruct_s"] + t["write_s"] for t in steady)
@@ -330,7 +334,7 @@ def run_bench(
     dict
         ``machine``, ``device``, ``quick``, ``case``, ``rss_before_mb``, ``stages`` and ``targets``.
     """
-    from napari_ssdpc.calibration.calibrate import calibrate
+    from napari_ssdpc.calibration import calibrate
     from napari_ssdpc.reconstruction.backend import get_backend
 
     get_backend(device)  # a missing GPU stops here, before any work

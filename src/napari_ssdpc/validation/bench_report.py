@@ -42,7 +42,7 @@ def format_report(report) -> str:
         f"NumPy {m['numpy']}, SciPy {m['scipy']}; device {report['device']}; "
         f"load average {m['load_average']} -> {m.get('load_average_end')}",
         f"case: PMMA bead, condenser NA {c['condenser_na']:g}, z {c['z'][0]:g}..{c['z'][1]:g} µm every "
-        f"{c['dz']:g} µm ({c['planes']} planes), {c['iterations']} RL iterations, method {c['method']}, "
+        f"{c['dz']:g} µm ({c['planes']} planes), {c['rl']['iterations']} RL iterations, method {c['method']}, "
         f"{c['lit_lenslets']} lit lenslets, views {c['view_shape']}" + (" (QUICK)" if report["quick"] else ""),
         "",
     ]

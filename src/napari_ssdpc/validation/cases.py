@@ -14,12 +14,14 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
-from napari_ssdpc.calibration.calibrate import calibrate
+from napari_ssdpc.calibration import calibrate
 from napari_ssdpc.errors import SsdpcWarning
 from napari_ssdpc.files import atomic_write
 from napari_ssdpc.physics.lattice import Grid
-from napari_ssdpc.reconstruction.pipeline import Reconstructor
+from napari_ssdpc.reconstruction.reconstructor import Reconstructor
+from napari_ssdpc.settings.config import RunConfig
 from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.settings.reconstruction import DEFAULT_Z_UM
 from napari_ssdpc.simulation import phantoms as ph
 from napari_ssdpc.simulation.multislice import Source
 from napari_ssdpc.simulation.sample_free import flat_frame, white_frame
@@ -124,7 +126,27 @@ def simulate_case(
     return Case(name, optics, phantom, frame, flat, white, grid, seconds)
 
 
-def reconstruct_case(case: Case, *, z=(-80.0, 80.0), dz=1.0, **kw):
+def run_config(optics: Optics, *, z=DEFAULT_Z_UM, dz: float = 1.0, **settings) -> RunConfig:
+    """The run configuration of a validation run.
+
+    Parameters
+    ----------
+    optics : Optics
+    z : (float, float)
+        z range, µm.
+    dz : float
+        Plane spacing, µm.
+    **settings
+        Reconstruction keys (``method='wotf'``, ``rl={'iterations': 8}``, ``device='gpu'``, ...).
+
+    Returns
+    -------
+    RunConfig
+    """
+    return RunConfig.of(optics, z_min_um=float(z[0]), z_max_um=float(z[1]), dz_um=float(dz), **settings)
+
+
+def reconstruct_case(case: Case, *, z=DEFAULT_Z_UM, dz=1.0, stacks: bool = False, **settings):
     """Calibrate on the case's white frame and reconstruct its frame.
 
     Parameters
@@ -134,8 +156,10 @@ def reconstruct_case(case: Case, *, z=(-80.0, 80.0), dz=1.0, **kw):
         z range, µm.
     dz : float
         Plane spacing, µm.
-    **kw
-        More Reconstructor keywords.
+    stacks : bool
+        Compute the directional stacks too.
+    **settings
+        Reconstruction keys (see :func:`run_config`).
 
     Returns
     -------
@@ -145,7 +169,7 @@ def reconstruct_case(case: Case, *, z=(-80.0, 80.0), dz=1.0, **kw):
     rec : Reconstructor
     """
     cal = calibrate(case.white, case.optics)
-    rec = Reconstructor(case.optics, cal, z=z, dz=dz, flat=case.flat, **kw)
+    rec = Reconstructor(run_config(case.optics, z=z, dz=dz, **settings), cal, flat=case.flat, stacks=stacks)
     frame = case.frame if case.frame.ndim == 2 else case.frame[0]
     return rec.reconstruct(frame), cal, rec
 

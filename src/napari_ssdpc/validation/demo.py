@@ -8,16 +8,16 @@ from pathlib import Path
 
 import numpy as np
 
-from napari_ssdpc.calibration.calibrate import calibrate, overlay_png
+from napari_ssdpc.calibration import calibrate, overlay_png
 from napari_ssdpc.io.frames import write_ome_tiff, write_tiffs
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.progress import tqdm_callback
-from napari_ssdpc.reconstruction.pipeline import Reconstructor
+from napari_ssdpc.reconstruction.reconstructor import Reconstructor
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation import phantoms
 from napari_ssdpc.simulation.sample_free import flat_frame, white_frame
 from napari_ssdpc.simulation.simulate import simulate
-from napari_ssdpc.validation.cases import VALIDATION_NA, bead_metrics
+from napari_ssdpc.validation.cases import VALIDATION_NA, bead_metrics, run_config
 from napari_ssdpc.validation.figures import bead_figure
 
 # What the demo writes into its folder (each file atomically; the three frames as one set).
@@ -79,7 +79,7 @@ def run_demo(out: Path, optics: Optics | None = None, seed: int = 0, z=(-80.0, 8
 
     t1 = time.perf_counter()
     with tqdm_callback("building operators", unit="plane") as cb:
-        rec = Reconstructor(optics, cal, z=z, dz=dz, flat=flat, stacks=False, progress=cb)
+        rec = Reconstructor(run_config(optics, z=z, dz=dz), cal, flat=flat, progress=cb)
     result = rec.reconstruct(frame)
     t_rec = time.perf_counter() - t1
     write_ome_tiff(
@@ -95,7 +95,8 @@ def run_demo(out: Path, optics: Optics | None = None, seed: int = 0, z=(-80.0, 8
         bead,
         optics.medium_index,
         out / "summary.png",
-        f"ssDPC demo: 13 µm PMMA bead (n 1.49 in 1.518), condenser NA {optics.condenser_na:g}, method {rec.method}",
+        f"ssDPC demo: 13 µm PMMA bead (n 1.49 in 1.518), condenser NA {optics.condenser_na:g}, "
+        f"method {rec.method.name}",
     )
     cx, cy, cz = m["centroid_um"]
     print(f"reconstructed {result.ri.shape} (z, y, x) in {t_rec:.0f} s (operators {rec.build_seconds:.0f} s)")
@@ -104,7 +105,7 @@ def run_demo(out: Path, optics: Optics | None = None, seed: int = 0, z=(-80.0, 8
         f"FWHM lateral {m['fwhm_x_um']:.1f} µm, axial {m['fwhm_z_um']:.1f} µm"
     )
     st = result.settings
-    if rec.method == "tv":
+    if rec.method.name == "tv":
         print(
             f"TV solve: {st['tv_iterations_run']} iterations, sign {st['tv_sign']}, noise {st['tv_noise']:.3g}, "
             f"residual / noise {st['tv_residual_over_noise']:.1f}"

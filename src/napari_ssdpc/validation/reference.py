@@ -31,6 +31,7 @@ import scipy.fft as sfft
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.reconstruction.deconvolution import RLResult
 from napari_ssdpc.reconstruction.dpc import phase_to_delta_n
+from napari_ssdpc.reconstruction.stacks import Stacks
 
 CANVASES = ("sensor", "eis")
 
@@ -137,12 +138,12 @@ def layout(rec, canvas: str = "sensor") -> Layout:
     """
     if canvas not in CANVASES:
         raise SsdpcError(f"unknown canvas '{canvas}'; use one of {', '.join(CANVASES)}")
-    if not hasattr(rec, "rl"):
+    if rec.stacks is None:
         raise SsdpcError(
             "the reference path needs the Richardson-Lucy operators; build the Reconstructor "
             "with stacks=True or method='rl'"
         )
-    p, q = rec.fft_shape
+    p, q = rec.stacks.fft_shape
     ny, nx = rec.mask.shape
     reach = ((p - ny) // 2, (q - nx) // 2)
     cells = np.array([(ln.row, ln.col) for ln in rec.lenslets])
@@ -159,7 +160,8 @@ def layout(rec, canvas: str = "sensor") -> Layout:
 def _kernels(rec, z, lay: Layout):
     """Lenslet kernels of plane z (K, 2R_y+1, 2R_x+1), centre in the middle: the fast path's
     OTFs (full spectrum) back in real space, cropped to the reach."""
-    full = sfft.irfft2(rec.psf.otf(float(z), rec.fft_shape), s=rec.fft_shape, workers=-1)
+    ops = rec.stacks
+    full = sfft.irfft2(ops.psf.otf(float(z), ops.fft_shape), s=ops.fft_shape, workers=-1)
     ry, rx = lay.reach
     full = np.roll(full, (ry, rx), axis=(-2, -1))
     return full[:, : 2 * ry + 1, : 2 * rx + 1]
@@ -206,9 +208,9 @@ class ReferenceRL:
 
     def __init__(self, rec, half: str, lay: Layout, kernels=None, progress=None):
         self.lay = lay
-        self.members = list(rec.halves[half])
+        self.members = list(rec.views.halves[half])
         self.z = len(rec.z_um)
-        self.view_mask = np.asarray(rec.view_mask, np.float32)
+        self.view_mask = np.asarray(rec.views.view_mask, np.float32)
         t0 = time.perf_counter()
         self.otf = np.empty((self.z, lay.shape[0], lay.shape[1] // 2 + 1), np.complex64)
         for i, z in enumerate(rec.z_um):
@@ -371,10 +373,10 @@ def reconstruct_reference(rec, frame, canvas: str = "sensor", progress=None) -> 
     """
     lay = layout(rec, canvas)
     t0 = time.perf_counter()
-    views = rec.preprocess(frame)
+    views = rec.views(frame)
     pre = time.perf_counter() - t0
     stacks, build, run = {}, 0.0, 0.0
-    for j, h in enumerate(rec.halves):
+    for j, h in enumerate(rec.views.halves):
         op = ReferenceRL(
             rec,
             h,
@@ -383,13 +385,13 @@ def reconstruct_reference(rec, frame, canvas: str = "sensor", progress=None) -> 
         )
         build += op.build_seconds
         t0 = time.perf_counter()
-        stacks[h] = op.run(views[op.members], rec.iterations).stack
+        stacks[h] = op.run(views[op.members], rec.config.reconstruction.rl.iterations).stack
         run += time.perf_counter() - t0
         del op
     t0 = time.perf_counter()
-    dpc, _ = rec.dpc_from_stacks(stacks)
+    dpc, absorption = rec.stacks.dpc(stacks)
     t1 = time.perf_counter()
-    phase, _ = rec.phase_from(views, dpc)
+    phase = rec.method.solve(views, Stacks(stacks, dpc, absorption, {}, rec.stacks.h_dpc)).phase
     dn = phase_to_delta_n(phase, rec.optics.wavelength_um, rec.dz)
     return ReferenceResult(
         stacks,

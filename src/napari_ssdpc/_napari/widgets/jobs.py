@@ -37,7 +37,7 @@ class Outcome:
 def _relay(fn, stop: threading.Event):
     """Run ``fn(progress, should_stop)`` in a helper thread and yield its progress reports
     ``(done, total, label)`` as they arrive; return its result or raise its exception."""
-    from napari_ssdpc.reconstruction.pipeline import Cancelled
+    from napari_ssdpc.errors import Cancelled
 
     reports: queue.Queue = queue.Queue()
     box = {}
@@ -71,7 +71,7 @@ def _relay(fn, stop: threading.Event):
 
 def _job(fn, stop):
     """Generator run by the thread_worker: progress reports, then an Outcome."""
-    from napari_ssdpc.reconstruction.pipeline import Cancelled
+    from napari_ssdpc.errors import Cancelled
 
     try:
         value = yield from _relay(fn, stop)

@@ -15,10 +15,16 @@ from napari_ssdpc._napari.widgets.common import (
     show_layer,
 )
 from napari_ssdpc._napari.widgets.jobs import JobRunner
-from napari_ssdpc._napari.widgets.session import build_reconstructor, calibration_of
+from napari_ssdpc._napari.widgets.session import calibration_of
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.reconstruction.methods import METHODS
 from napari_ssdpc.settings.base import field_range
-from napari_ssdpc.settings.reconstruction import PHASE_METHODS, SIGNS, TRANSFER_MODELS, ReconstructionSettings
+from napari_ssdpc.settings.reconstruction import (
+    SIGNS,
+    TRANSFER_MODELS,
+    ReconstructionSettings,
+    TvSettings,
+)
 
 __all__ = ["OperatorsWidget"]
 
@@ -28,7 +34,7 @@ class OperatorsWidget(StepWidget):
 
     def __init__(self, napari_viewer):
         super().__init__(napari_viewer, "operators_widget")
-        rec = ReconstructionSettings().to_dict()
+        rec = ReconstructionSettings()
         self.calibration = ComboBox(
             label="calibration",
             choices=calibration_layer_choices(napari_viewer),
@@ -39,7 +45,7 @@ class OperatorsWidget(StepWidget):
             min=-5000,
             max=5000,
             step=1,
-            value=rec["z_min_um"],
+            value=rec.z_min_um,
             tooltip="first plane, µm from the focal plane (z > 0: farther from the objective)",
         )
         self.z_max = FloatSpinBox(
@@ -47,7 +53,7 @@ class OperatorsWidget(StepWidget):
             min=-5000,
             max=5000,
             step=1,
-            value=rec["z_max_um"],
+            value=rec.z_max_um,
             tooltip="last plane, µm from the focal plane",
         )
         self.dz = FloatSpinBox(
@@ -55,44 +61,42 @@ class OperatorsWidget(StepWidget):
             min=0.05,
             max=100,
             step=0.05,
-            value=rec["dz_um"],
+            value=rec.dz_um,
             tooltip="plane spacing, µm (the paper's axial resolution is about 21 µm)",
         )
         self.model = ComboBox(
             label="transfer model",
             choices=list(TRANSFER_MODELS),
-            value=rec["model"],
+            value=rec.rl.model,
             tooltip="lenslet: the MLA splits the detection pupil (default); paper: half-disk "
             "sources as in the paper's Eq. 4",
         )
         self.method = ComboBox(
             label="phase method",
-            choices=list(PHASE_METHODS),
-            value=rec["method"],
-            tooltip="tv: all views inverted with total variation, the sign of Δn and the field stop (default);"
-            " wotf: 3D Tikhonov with each lenslet's defocused transfer function (fast);"
-            " rl: Richardson–Lucy stacks, DPC and Tikhonov per slice (the paper's route)",
+            choices=list(METHODS),
+            value=rec.method,
+            tooltip="; ".join(f"{name}: {entry.summary}" for name, entry in METHODS.items()),
         )
-        fields = ReconstructionSettings.model_fields
+        fields = TvSettings.model_fields
         self.sign = ComboBox(
-            label="sign of Δn (tv)", choices=list(SIGNS), value=rec["sign"], tooltip=fields["sign"].description
+            label="sign of Δn (tv)", choices=list(SIGNS), value=rec.tv.sign, tooltip=fields["sign"].description
         )
-        lo, hi = field_range(ReconstructionSettings, "tv_lambda")
+        lo, hi = field_range(TvSettings, "lambda_scale")
         self.tv_lambda = FloatSpinBox(
             label="TV weight (tv)",
             min=0.0,
             max=hi,
             step=0.1,
             value=0.0,
-            tooltip=f"{fields['tv_lambda'].description}; 0 = automatic, else {lo:g} to {hi:g}",
+            tooltip=f"{fields['lambda_scale'].description}; 0 = automatic, else {lo:g} to {hi:g}",
         )
-        lo, hi = field_range(ReconstructionSettings, "tv_iterations")
+        lo, hi = field_range(TvSettings, "iterations")
         self.tv_iterations = SpinBox(
             label="TV iterations (tv)",
             min=int(lo),
             max=int(hi),
-            value=rec["tv_iterations"],
-            tooltip=fields["tv_iterations"].description,
+            value=rec.tv.iterations,
+            tooltip=fields["iterations"].description,
         )
         self.stacks = CheckBox(
             text="directional stacks (Richardson–Lucy)",
@@ -139,9 +143,9 @@ class OperatorsWidget(StepWidget):
         follow_layers(napari_viewer, self)
 
     def _defaults(self, optics):
-        rec = ReconstructionSettings().to_dict()
-        self.z_min.value, self.z_max.value, self.dz.value = rec["z_min_um"], rec["z_max_um"], rec["dz_um"]
-        self.model.value, self.method.value = rec["model"], rec["method"]
+        rec = ReconstructionSettings()
+        self.z_min.value, self.z_max.value, self.dz.value = rec.z_min_um, rec.z_max_um, rec.dz_um
+        self.model.value, self.method.value = rec.rl.model, rec.method
 
     def show_settings(self, rec: ReconstructionSettings) -> None:
         """Show loaded reconstruction settings (z grid, model, method, the 'tv' parameters).
@@ -151,9 +155,9 @@ class OperatorsWidget(StepWidget):
         rec : ReconstructionSettings
         """
         self.z_min.value, self.z_max.value, self.dz.value = rec.z_min_um, rec.z_max_um, rec.dz_um
-        self.model.value, self.method.value, self.sign.value = rec.model, rec.method, rec.sign
-        self.tv_lambda.value = rec.tv_lambda or 0.0
-        self.tv_iterations.value = rec.tv_iterations
+        self.model.value, self.method.value, self.sign.value = rec.rl.model, rec.method, rec.tv.sign
+        self.tv_lambda.value = rec.tv.lambda_scale or 0.0
+        self.tv_iterations.value = rec.tv.iterations
 
     def _stale(self, _optics):
         if self.session.built is not None and not self.runner.running:
@@ -168,45 +172,48 @@ class OperatorsWidget(StepWidget):
             return []
         return [(f"({ln.row}, {ln.col})", i) for i, ln in enumerate(rec.lenslets)]
 
-    def operator_settings(self) -> dict:
-        """What this widget sets of the operators (see Session.spec).
+    def settings_changes(self) -> dict:
+        """The reconstruction keys this widget shows (see :meth:`Session.settings`).
 
         Returns
         -------
         dict
-            calibration, z, dz, model, method, stacks and the 'tv' settings.
+            z grid, method, the DPC model and the 'tv' section's keys.
         """
-        layer = self.calibration.value
         return {
-            "calibration": None if layer is None else calibration_of(layer),
-            "z": (float(self.z_min.value), float(self.z_max.value)),
-            "dz": float(self.dz.value),
-            "model": self.model.value,
+            "z_min_um": float(self.z_min.value),
+            "z_max_um": float(self.z_max.value),
+            "dz_um": float(self.dz.value),
             "method": self.method.value,
-            "stacks": bool(self.stacks.value),
+            "rl": {"model": self.model.value},
             "tv": {
                 "sign": self.sign.value,
-                "tv_lambda": float(self.tv_lambda.value) or None,
-                "tv_iterations": int(self.tv_iterations.value),
+                "lambda_scale": float(self.tv_lambda.value) or None,
+                "iterations": int(self.tv_iterations.value),
             },
         }
+
+    def inputs(self) -> dict:
+        """The calibration and whether to compute the directional stacks (see :meth:`Session.job`)."""
+        layer = self.calibration.value
+        return {"calibration": None if layer is None else calibration_of(layer), "stacks": bool(self.stacks.value)}
 
     def run(self, *_):
         """Build the operators (a Reconstructor) in a worker."""
         try:
-            spec = self.session.spec()
+            job = self.session.job()
             self.session.remember()
         except SsdpcError as e:
             notify.error(e)
             return None
 
         def work(progress, should_stop):
-            return build_reconstructor(spec, progress)
+            return job.build(progress)
 
-        return self.runner.start(work, lambda rec: self._done(spec, rec), "Operators")
+        return self.runner.start(work, lambda rec: self._done(job, rec), "Operators")
 
-    def _done(self, spec, rec):
-        self.session.built = (spec, rec)
+    def _done(self, job, rec):
+        self.session.built = (job, rec)
         self.session.operators_built.emit(rec)
         return (
             f"built: {len(rec.z_um)} planes {rec.z_um[0]:g}…{rec.z_um[-1]:g} µm, {len(rec.lenslets)} lit "
@@ -216,7 +223,7 @@ class OperatorsWidget(StepWidget):
     def show_psf(self, *_):
         """Add the chosen lenslet's PSF stack (z, y, x) as a layer in µm, computed in a worker."""
         rec = self.session.built[1] if self.session.built else None
-        if rec is None or getattr(rec, "psf", None) is None:
+        if rec is None or rec.stacks is None:
             notify.error("no PSF operators: tick 'directional stacks' and press Build operators first")
             return None
         k = self.lenslet.value or 0
@@ -225,7 +232,7 @@ class OperatorsWidget(StepWidget):
         def work(progress, should_stop):
             out = []
             for i, z in enumerate(rec.z_um):
-                out.append(rec.psf.kernels(float(z))[k])
+                out.append(rec.stacks.psf.kernels(float(z))[k])
                 progress(i + 1, len(rec.z_um), "PSF")
             return np.stack(out)
 

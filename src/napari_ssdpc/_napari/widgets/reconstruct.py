@@ -20,10 +20,12 @@ from napari_ssdpc._napari.widgets.common import (
     show_layer,
 )
 from napari_ssdpc._napari.widgets.jobs import JobRunner
-from napari_ssdpc._napari.widgets.session import build_reconstructor
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.reconstruction.outputs import QUANTITIES
-from napari_ssdpc.settings.reconstruction import ReconstructionSettings
+from napari_ssdpc.pipeline.run import Pipeline
+from napari_ssdpc.pipeline.sinks import MemorySink, ZarrSink
+from napari_ssdpc.settings.base import field_range
+from napari_ssdpc.settings.outputs import QUANTITIES
+from napari_ssdpc.settings.reconstruction import ReconstructionSettings, RlSettings
 
 __all__ = ["WATCH_MS", "ReconstructWidget", "result_arrays"]
 
@@ -64,7 +66,7 @@ class ReconstructWidget(StepWidget):
 
     def __init__(self, napari_viewer):
         super().__init__(napari_viewer, "reconstruct_widget")
-        rec = ReconstructionSettings().to_dict()
+        rec = ReconstructionSettings()
         self.raw = ComboBox(
             label="raw frame(s)",
             choices=image_layer_choices(napari_viewer),
@@ -76,11 +78,12 @@ class ReconstructWidget(StepWidget):
             tooltip="flat frame (no sample) at the sample's condenser setting, for flat-fielding; "
             "none: each view is normalised by its median",
         )
+        lo, hi = field_range(RlSettings, "iterations")
         self.iterations = SpinBox(
             label="RL iterations",
-            min=1,
-            max=10000,
-            value=int(rec["rl_iterations"]),
+            min=int(lo),
+            max=int(hi),
+            value=rec.rl.iterations,
             tooltip="Richardson–Lucy iterations per directional stack (no unit; 10–20 usual)",
         )
         self.alpha = FloatSpinBox(
@@ -88,7 +91,7 @@ class ReconstructWidget(StepWidget):
             min=0.0,
             max=100.0,
             step=1e-4,
-            value=float(rec["tikhonov_alpha"] or 0.0),
+            value=0.0,
             tooltip="Tikhonov regularisation of the phase inversion (no unit; paper Eq. 7), "
             "relative to the strongest transfer function; 0 = the method's default",
         )
@@ -139,9 +142,8 @@ class ReconstructWidget(StepWidget):
         follow_layers(napari_viewer, self)
 
     def _defaults(self, optics):
-        rec = ReconstructionSettings().to_dict()
-        self.iterations.value = int(rec["rl_iterations"])
-        self.alpha.value = float(rec["tikhonov_alpha"] or 0.0)
+        self.iterations.value = ReconstructionSettings().rl.iterations
+        self.alpha.value = 0.0
 
     def show_settings(self, rec: ReconstructionSettings) -> None:
         """Show loaded reconstruction settings (RL iterations, Tikhonov α; 0 = the default).
@@ -150,23 +152,25 @@ class ReconstructWidget(StepWidget):
         ----------
         rec : ReconstructionSettings
         """
-        self.iterations.value = rec.rl_iterations
-        self.alpha.value = rec.tikhonov_alpha or 0.0
+        self.iterations.value = rec.rl.iterations
+        default = type(rec.section)().alpha
+        self.alpha.value = 0.0 if rec.alpha == default else rec.alpha
 
-    def run_settings(self) -> dict:
-        """Settings of this widget that the operators do not depend on."""
-        return {"rl_iterations": int(self.iterations.value)}
-
-    def operator_settings(self) -> dict:
-        """What this widget sets of the operators (see Session.spec).
+    def settings_changes(self) -> dict:
+        """The reconstruction keys this widget shows (see :meth:`Session.settings`).
 
         Returns
         -------
         dict
-            ``flat`` (the flat frame's data or None) and ``alpha`` (None: the method's default).
+            RL iterations, and the chosen method's α unless 0 (its default).
         """
+        alpha = float(self.alpha.value)
+        return {"rl": {"iterations": int(self.iterations.value)}, **({"*": {"alpha": alpha}} if alpha else {})}
+
+    def inputs(self) -> dict:
+        """The flat frame's data, or None (see :meth:`Session.job`)."""
         flat = self.flat.value
-        return {"flat": None if flat is None else flat.data, "alpha": float(self.alpha.value) or None}
+        return {"flat": None if flat is None else flat.data}
 
     def quantities(self) -> list[str]:
         """Registry names to show: RI and every ticked output."""
@@ -178,80 +182,68 @@ class ReconstructWidget(StepWidget):
         if layer is None:
             notify.error("no raw frame: open a light-field frame (or the sample data) first")
             return None
+        wanted = self.quantities()
         try:
-            spec = self.session.spec()
+            job = self.session.job(save=[q for q in wanted if q != "ri"])
             self.session.remember()
         except SsdpcError as e:
             notify.error(e)
-            return None
-        wanted = self.quantities()
-        needs_rl = [q for q in wanted if QUANTITIES[q].needs_stacks]
-        if needs_rl and not spec["stacks"] and spec["method"] != "rl":
-            notify.error(f"{needs_rl[0]} needs the directional stacks: tick 'directional stacks' in Operators")
             return None
         data = layer.data
         t = frame_index(self.viewer, layer)
         series = t is not None and self.frames.value == "all frames"
         indices = list(range(data.shape[0])) if series else [t]
-        built = self.session.matching(spec)
-        iterations = int(self.iterations.value)
-        if series and str(self.store.value or "").endswith(".zarr"):
-            return self._stream(layer, spec, wanted, built, iterations, Path(self.store.value))
+        built = self.session.matching(job)
+        store = str(self.store.value or "")
+        if series and store.endswith(".zarr"):
+            return self._stream(layer, job, built, Path(store))
+        frames = data if series else np.asarray(data if t is None else data[t])
 
         def work(progress, should_stop):
-            rec = built or build_reconstructor(spec, progress)
-            rec.iterations = iterations  # a run-time setting: the operators do not depend on it
-            collected, res = {}, None
-            for i, ti in enumerate(indices):
-                if series:
-                    progress(i, len(indices), "reading frames")
-                frame = np.asarray(data if ti is None else data[ti])
-                prefix = f"frame {ti} ({i + 1}/{len(indices)}): " if series else ""
-                res = rec.reconstruct(
-                    frame,
-                    progress=lambda d, n, lab: progress(d, n, prefix + lab),  # noqa: B023
-                    should_stop=should_stop,
-                )
-                for q, a in result_arrays(res, wanted).items():
-                    collected.setdefault(q, []).append(a)
-            out = {q: (np.stack(v) if series else v[0]) for q, v in collected.items()}
-            return rec, out, res
+            pipeline = Pipeline(job, reconstructor=built, progress=progress)
+            sink = MemorySink(keep=lambda res: (result_arrays(res, wanted), res))
+            label = {"t": 0}
 
-        return self.runner.start(work, lambda r: self._done(spec, layer.name, indices, *r), "Reconstruct")
+            def per_frame(t, done, total, result):
+                label["t"] = t + 1
 
-    def _stream(self, layer, spec, wanted, built, iterations, store: Path):
+            def within(d, n, lab):
+                prefix = f"frame {indices[label['t']]} ({label['t'] + 1}/{len(indices)}): " if series else ""
+                progress(d, n, prefix + lab)
+
+            pipeline.run(
+                frames, sink, progress=False, on_frame=per_frame, iteration_progress=within, should_stop=should_stop
+            )
+            kept = [sink.frames[i] for i in sorted(sink.frames)]
+            out = {q: (np.stack([k[0][q] for k in kept]) if series else kept[0][0][q]) for q in kept[-1][0]}
+            return pipeline.reconstructor, out, kept[-1][1]
+
+        return self.runner.start(work, lambda r: self._done(job, layer.name, indices, *r), "Reconstruct")
+
+    def _stream(self, layer, job, built, store: Path):
         """Every frame of a series into the OME-Zarr ``store``, shown from disk as frames finish."""
-        from napari_ssdpc.io.frame_source import FrameSource
-        from napari_ssdpc.io.series import Recipe, reconstruct_series
-
+        path = layer.metadata.get("ssdpc", {}).get("path")
+        frames = path if path and Path(path).is_file() else layer.data  # a file streams from disk
+        optics = job.config.optics
+        meta = {"source": layer.name, "optics": optics.to_dict(), "medium_index": optics.medium_index}
         try:
-            settings = self.session.settings()
+            sink = ZarrSink(store, job.config.outputs.save, meta)
         except SsdpcError as e:
             notify.error(e)
             return None
-        flat = None if spec["flat"] is None else np.asarray(spec["flat"])
-        recipe = Recipe(spec["optics"], spec["calibration"], dict(settings=settings, stacks=spec["stacks"]), flat)
-        path = layer.metadata.get("ssdpc", {}).get("path")
-        frames = path if path and Path(path).is_file() else layer.data  # a file streams from disk
-        optics = spec["optics"]
-        meta = {"source": layer.name, "optics": optics.to_dict(), "medium_index": optics.medium_index}
 
         def work(progress, should_stop):
-            rec = built or build_reconstructor(spec, progress)
-            rec.iterations = iterations
-            reconstruct_series(
-                FrameSource(frames),
-                store,
-                recipe,
-                save=[q for q in wanted if q != "ri"],
-                meta=meta,
+            pipeline = Pipeline(job, reconstructor=built, progress=progress)
+            pipeline.run(
+                frames,
+                sink,
                 progress=False,
-                rec=rec,
-                on_frame=lambda t, done, total: progress(done, total, f"frame {t} written to {store.name}"),
+                should_stop=should_stop,
+                on_frame=lambda t, done, total, _res: progress(done, total, f"frame {t} written to {store.name}"),
             )
-            return rec
+            return pipeline.reconstructor
 
-        worker = self.runner.start(work, lambda rec: self._streamed(spec, rec, store), "Reconstruct")
+        worker = self.runner.start(work, lambda rec: self._streamed(job, rec, store), "Reconstruct")
         if worker is not None:
             self._shown_frames = -1
             self._watch = QTimer()
@@ -277,14 +269,14 @@ class ReconstructWidget(StepWidget):
             self._watch.stop()
             self._watch = None
 
-    def _streamed(self, spec, rec, store: Path):
-        self.session.built = (spec, rec)
+    def _streamed(self, job, rec, store: Path):
+        self.session.built = (job, rec)
         self.session.operators_built.emit(rec)
         self._show_store(store)
         return f"{store.name}: {self._shown_frames} frames written"
 
-    def _done(self, spec, source, indices, rec, arrays, res):
-        self.session.built = (spec, rec)
+    def _done(self, job, source, indices, rec, arrays, res):
+        self.session.built = (job, rec)
         self.session.operators_built.emit(rec)
         optics = rec.optics
         info = {

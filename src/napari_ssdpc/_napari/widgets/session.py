@@ -15,14 +15,14 @@ from psygnal import Signal
 
 from napari_ssdpc._napari.placement import follow_optics
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.pipeline.job import Job
 from napari_ssdpc.settings.config import RunConfig
 from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.settings.outputs import OutputSettings
 from napari_ssdpc.settings.reconstruction import ReconstructionSettings
 
 __all__ = [
-    "TV_KEYS",
     "Session",
-    "build_reconstructor",
     "calibration_of",
     "real_viewer",
     "remembered_settings_path",
@@ -41,7 +41,7 @@ class Session:
     def __init__(self):
         self.optics = Optics.paper()
         self.base = ReconstructionSettings()  # what no widget shows (dn_max, device, ...) and the defaults
-        self.built = None  # (spec, Reconstructor)
+        self.built = None  # (Job, Reconstructor)
         self.operators_widget = None  # weak references, set by the widgets
         self.reconstruct_widget = None
 
@@ -71,27 +71,6 @@ class Session:
         if loaded:
             self.optics_loaded.emit(optics)
 
-    def spec(self) -> dict:
-        """Everything a Reconstructor is built from: the Operators widget's z range, dz, model,
-        method and calibration, and the Reconstruct widget's flat frame and α."""
-        rec = self.base.to_dict()
-        spec = {
-            "optics": self.optics,
-            "calibration": None,
-            "z": (float(rec["z_min_um"]), float(rec["z_max_um"])),
-            "dz": float(rec["dz_um"]),
-            "model": rec["model"],
-            "method": rec["method"],
-            "stacks": False,  # RL stacks only when DPC, stacks, absorption or the PSF are asked for
-            "alpha": rec["tikhonov_alpha"],
-            "tv": {k: rec[k] for k in TV_KEYS},
-            "flat": None,
-        }
-        for w in self._widgets():
-            given = w.operator_settings()
-            spec.update({**given, "tv": {**spec["tv"], **given.get("tv", {})}})
-        return spec
-
     def _widgets(self):
         refs = (self.operators_widget, self.reconstruct_widget)
         return [w for w in (r() if r is not None else None for r in refs) if w is not None]
@@ -99,29 +78,63 @@ class Session:
     def settings(self) -> ReconstructionSettings:
         """The reconstruction settings the widgets show now, as the CLI reads them.
 
+        Each widget gives the keys it shows (``settings_changes``: top-level keys and method
+        sections; the section ``'*'`` is the chosen method's); the rest comes from the last loaded
+        file. Validated once, here.
+
         Returns
         -------
         ReconstructionSettings
-            z range, method and its parameters from the widgets; the rest from the last loaded file.
         """
-        spec = self.spec()
-        values = {
-            **self.base.to_dict(),
-            **spec["tv"],
-            "z_min_um": spec["z"][0],
-            "z_max_um": spec["z"][1],
-            "dz_um": spec["dz"],
-            "method": spec["method"],
-            "model": spec["model"],
-            "tikhonov_alpha": spec["alpha"],
-        }
+        data = self.base.to_dict()
+        star: dict = {}
         for w in self._widgets():
-            values.update(getattr(w, "run_settings", dict)())
-        return ReconstructionSettings.from_dict(values, source="the dock's settings")
+            for key, value in w.settings_changes().items():
+                if key == "*":
+                    star.update(value)
+                elif isinstance(value, dict):
+                    data[key] = {**data[key], **value}
+                else:
+                    data[key] = value
+        if star:
+            data[data["method"]] = {**data[data["method"]], **star}
+        return ReconstructionSettings.from_dict(data, source="the dock's settings")
 
-    def run_config(self) -> RunConfig:
-        """The optics and the reconstruction settings: what ``ssdpc reconstruct --config`` reads."""
-        return RunConfig(optics=self.optics, reconstruction=self.settings())
+    def run_config(self, save=()) -> RunConfig:
+        """The optics, the reconstruction settings and the outputs: what ``ssdpc reconstruct --config`` reads.
+
+        Parameters
+        ----------
+        save : iterable of str
+            Quantities beside RI.
+
+        Returns
+        -------
+        RunConfig
+        """
+        return RunConfig(
+            optics=self.optics, reconstruction=self.settings(), outputs=OutputSettings.from_dict({"save": list(save)})
+        )
+
+    def job(self, save=()) -> Job:
+        """The job the widgets describe: run configuration, calibration, flat, stacks.
+
+        Parameters
+        ----------
+        save : iterable of str
+            Quantities beside RI.
+
+        Returns
+        -------
+        Job
+        """
+        inputs: dict = {"calibration": None, "flat": None, "stacks": False}
+        for w in self._widgets():
+            inputs.update(w.inputs())
+        if inputs["calibration"] is None:
+            raise SsdpcError("no calibration: run Calibrate on a white frame, or open a calibration JSON")
+        flat = None if inputs["flat"] is None else np.asarray(inputs["flat"])
+        return Job(self.run_config(save), inputs["calibration"], flat, stacks=bool(inputs["stacks"]))
 
     def load_config(self, config: RunConfig) -> None:
         """Show a run configuration in every widget (optics first, then the settings).
@@ -144,13 +157,13 @@ class Session:
         except (SsdpcError, OSError):
             pass
 
-    def matching(self, spec):
-        """The built Reconstructor if it was made from exactly ``spec``, else None.
+    def matching(self, job: Job):
+        """The built Reconstructor if it serves ``job`` (the same calibration and flat, operators
+        of the same settings; runtime settings such as iterations are taken over), else None.
 
         Parameters
         ----------
-        spec : dict
-            As :meth:`spec` returns it.
+        job : Job
 
         Returns
         -------
@@ -159,12 +172,17 @@ class Session:
         if self.built is None:
             return None
         old, rec = self.built
-        same = all((old[k] is spec[k]) if k in ("optics", "calibration", "flat") else old[k] == spec[k] for k in spec)
-        return rec if same else None
+        same_inputs = old.calibration is job.calibration and _same_array(old.flat, job.flat)
+        if same_inputs and (rec.stacks is not None or not job.stacks) and rec.adopt(job.config):
+            return rec
+        return None
 
 
-#: Settings a widget hands to the 'tv' solver (a subset of ReconstructionSettings).
-TV_KEYS = ("sign", "tv_lambda", "tv_iterations", "dn_max", "refraction_increment_um3_pg")
+def _same_array(a, b) -> bool:
+    """The same frame: both None, or equal arrays (a layer's data may be copied, not changed)."""
+    if a is None or b is None:
+        return a is b
+    return a is b or (a.shape == b.shape and np.array_equal(a, b))
 
 
 def remembered_settings_path() -> Path:
@@ -233,42 +251,9 @@ def calibration_of(layer):
     -------
     Calibration
     """
-    from napari_ssdpc.calibration.calibrate import Calibration
+    from napari_ssdpc.calibration import Calibration
 
     info = layer.metadata.get("ssdpc", {})
     if "_object" not in info:
         info["_object"] = Calibration.from_dict(info["calibration"], source=f"layer '{layer.name}'")
     return info["_object"]
-
-
-def build_reconstructor(spec, progress=None):
-    """A core Reconstructor from a session spec (called in the worker thread).
-
-    Parameters
-    ----------
-    spec : dict
-        As Session.spec returns it.
-    progress : callable, optional
-
-    Returns
-    -------
-    Reconstructor
-    """
-    from napari_ssdpc.reconstruction.pipeline import Reconstructor
-
-    if spec["calibration"] is None:
-        raise SsdpcError("no calibration: run Calibrate on a white frame, or open a calibration JSON")
-    flat = None if spec["flat"] is None else np.asarray(spec["flat"])
-    return Reconstructor(
-        spec["optics"],
-        spec["calibration"],
-        ReconstructionSettings.from_dict(spec["tv"], source="TV settings"),
-        z=spec["z"],
-        dz=spec["dz"],
-        model=spec["model"],
-        method=spec["method"],
-        stacks=spec["stacks"],
-        alpha=spec["alpha"],
-        flat=flat,
-        progress=progress,
-    )

@@ -1,10 +1,14 @@
-"""Checks at the command line's boundary, before anything is computed or written.
+"""Checks of the inputs and the result, made once where the core meets them.
+
+The :class:`~napari_ssdpc.reconstruction.reconstructor.Reconstructor` runs them for the CLI,
+napari, the series runner and the Python API alike:
 
 - :func:`check_optics_match`: the optics in use against the calibration's (magnification,
   pitch, pixel size, wavelength) and against the lattice pitch measured on the white frame.
 - :func:`check_memory`: an estimate of the operators and outputs against the free memory.
 - :func:`check_flat` and :func:`check_frame_light`: a flat or raw frame without light, all
-  saturated, inverted, noise only or white (condenser open) is refused with what is wrong.
+  saturated, inverted, noise only or white (condenser open) is refused with what is wrong;
+  they read the per-lenslet light of views that are extracted once (:mod:`.contrast`).
 - :func:`check_result`: non-finite or unphysical volumes are refused before writing.
 """
 
@@ -21,11 +25,14 @@ from napari_ssdpc.errors import SsdpcError
 __all__ = [
     "MAX_DELTA_N",
     "available_memory",
+    "check_constant",
     "check_flat",
     "check_frame_light",
     "check_memory",
     "check_optics_match",
     "check_result",
+    "check_saturated",
+    "dark_pixels",
     "estimate_memory",
 ]
 
@@ -109,11 +116,11 @@ def estimate_memory(optics, cal, settings, stacks: bool) -> dict:
     dict
         ``planes``, ``lenslets``, ``operators`` and ``outputs`` (bytes) and ``total``.
     """
-    planes = int(math.floor((settings.z_max_um - settings.z_min_um) / settings.dz_um + 1e-6)) + 1
+    planes = settings.planes
     side = 2 * math.ceil(cal.ei_radius_px) + 1
     view = side * side  # pixels per view
     k = max(1, len(cal.lenslets))
-    with_rl = stacks or settings.method == "rl"
+    with_rl = stacks
     # (K x Z x band) complex64 operators: WOTF once, RL per half (each lenslet in two halves)
     ops = k * planes * (view // 2) * 8 * ((settings.method in ("wotf", "tv")) + 2 * with_rl)
     if settings.method == "tv":  # its operator on the padded z grid, and ~12 ADMM work arrays
@@ -154,24 +161,41 @@ def check_memory(optics, cal, settings, stacks: bool, available: int | None = No
     return est
 
 
-def _level_stats(img, cal, dark):
-    """Per-lenslet median light above the dark level, and the noise of the dark pixels."""
-    from napari_ssdpc.calibration import extract_views
+def dark_pixels(img, cal, step: int = 8) -> np.ndarray:
+    """A sparse sample of the pixels farther than 1.2 EI radii from every lenslet centre.
 
-    views = extract_views(img - dark, cal)
-    levels = np.array([np.median(v[views.mask]) for v in views.data])
-    step = 8
+    Parameters
+    ----------
+    img : ndarray, (H, W)
+        Camera units.
+    cal : Calibration
+    step : int
+        Sampling step, px (a sparse sample is plenty for a median).
+
+    Returns
+    -------
+    ndarray, (N,)
+        The pixels' values (empty where the EIs fill the frame).
+    """
     yy, xx = np.mgrid[0 : img.shape[0] : step, 0 : img.shape[1] : step]
     far = np.ones(yy.shape, bool)
+    r2 = (1.2 * cal.ei_radius_px) ** 2
     for cx, cy in cal.centres_px:
-        far &= (xx - cx) ** 2 + (yy - cy) ** 2 > (1.2 * cal.ei_radius_px) ** 2
-    outside = img[yy[far], xx[far]] if far.any() else img.ravel()
-    noise = 1.4826 * float(np.median(np.abs(outside - np.median(outside))))
-    return levels, max(noise, 1e-6)
+        far &= (xx - cx) ** 2 + (yy - cy) ** 2 > r2
+    return np.asarray(img[yy[far], xx[far]])
 
 
-def _constant(raw, img, name: str) -> None:
-    lo, hi = float(img.min()), float(img.max())
+def check_constant(img, name: str) -> None:
+    """Refuse a frame whose pixels all hold one value (no light, saturated, or no image).
+
+    Parameters
+    ----------
+    img : ndarray, (H, W)
+        Camera units.
+    name : str
+        For the message.
+    """
+    lo, hi = float(np.min(img)), float(np.max(img))
     if hi > lo:
         return
     if hi in FULL_SCALE_CODES:
@@ -184,7 +208,16 @@ def _constant(raw, img, name: str) -> None:
     raise SsdpcError(f"{name}: every pixel is {hi:g}: there is no image in it; check the camera and the file")
 
 
-def _saturated(raw, name: str) -> None:
+def check_saturated(raw, name: str) -> None:
+    """Refuse a frame with more than 20 % of its pixels saturated.
+
+    Parameters
+    ----------
+    raw : ndarray, (H, W)
+        As read (its dtype gives the camera's full scale).
+    name : str
+        For the message.
+    """
     from napari_ssdpc.calibration.saturation import saturated_fraction
 
     frac = saturated_fraction(raw)
@@ -192,24 +225,20 @@ def _saturated(raw, name: str) -> None:
         raise SsdpcError(f"{name}: {100 * frac:.0f}% of the pixels are saturated; shorten the exposure or dim the lamp")
 
 
-def check_flat(flat, optics, cal) -> None:
-    """Refuse a flat frame without light, saturated, or recorded with the condenser open (white).
+def check_flat(levels, noise: float, optics, name: str = "flat frame") -> None:
+    """Refuse a flat frame without light, or recorded with the condenser open (white).
 
     Parameters
     ----------
-    flat : numpy.ndarray
-        The flat frame (y, x).
+    levels : ndarray, (K,)
+        Every lenslet's median light above the dark level, camera units.
+    noise : float
+        Noise of the dark pixels, camera units.
     optics : Optics
         The optics in use (its condenser NA).
-    cal : Calibration
+    name : str
+        For the message.
     """
-    from napari_ssdpc.reconstruction.pipeline import estimate_dark
-
-    name = "flat frame"
-    img = cal.check_frame(flat, name=name)
-    _constant(flat, img, name)
-    _saturated(flat, name)
-    levels, noise = _level_stats(img, cal, estimate_dark(img, cal))
     top = float(np.nanmax(levels))
     if not top > 5 * noise:
         raise SsdpcError(
@@ -234,37 +263,35 @@ def _white(levels, top: float, optics, name: str, fix: str) -> None:
         )
 
 
-def check_frame_light(frame, rec, name: str = "frame") -> None:
+def check_frame_light(levels, noise: float, lit, expected, optics, name: str = "frame") -> None:
     """Refuse a raw frame without light in the lit lenslets' views, or unlike the flat.
 
     Parameters
     ----------
-    frame : numpy.ndarray
-        The raw frame (y, x).
-    rec : Reconstructor
-        Built for this calibration; ``rec.lit`` and ``rec.level`` (the flat's or the model's
-        direct light per lenslet).
+    levels : ndarray, (K,)
+        Every lenslet's median light above the dark level, camera units.
+    noise : float
+        Noise of the dark pixels, camera units.
+    lit : ndarray of int, (K_lit,)
+        The lenslets that get direct light.
+    expected : ndarray, (K_lit,)
+        Their direct light on the flat (or the model's), any scale.
+    optics : Optics
+        The optics in use (its condenser NA).
     name : str
         For the message.
     """
-    from napari_ssdpc.reconstruction.pipeline import estimate_dark
-
-    cal = rec.calibration
-    img = cal.check_frame(frame, name=name)
-    _constant(frame, img, name)
-    _saturated(frame, name)
-    levels, noise = _level_stats(img, cal, estimate_dark(img, cal))
-    lit = levels[rec.lit]
-    signal = float(np.median(lit))
+    on = levels[lit]
+    signal = float(np.median(on))
     if signal > 5 * noise:
-        _white(levels, signal, rec.optics, name, "give a raw frame recorded at that condenser NA, not the white frame")
+        _white(levels, signal, optics, name, "give a raw frame recorded at that condenser NA, not the white frame")
     if not signal > 5 * noise:
         raise SsdpcError(
             f"{name}: no light in the directly lit elemental images (median {signal:.3g} above the dark level, "
             f"noise {noise:.3g}): the lamp was off, the frame is inverted or noise only, or it comes from "
             "another instrument; give a raw light-field frame of this microscope"
         )
-    ratio = lit / np.maximum(np.asarray(rec.level, float)[rec.lit], 1e-12)
+    ratio = on / np.maximum(np.asarray(expected, float), 1e-12)
     spread = float(np.std(ratio) / np.mean(ratio))
     if spread > 0.5:
         raise SsdpcError(

@@ -1,9 +1,11 @@
-"""The registry of output quantities: one table that every writer, reader and widget uses.
+"""What a run writes: the registry of output quantities and the outputs section of a run.
 
 A quantity has a name (the key of ``--save``, of the OME-Zarr image group and of the file
 suffix), a unit, a description, a colormap and contrast rule for display, its kind (a (z, y, x)
 volume, a (y, x) map, or channels of volumes) and how to take it from a
-:class:`~napari_ssdpc.reconstruction.pipeline.Result`. A new quantity is added here, once.
+:class:`~napari_ssdpc.reconstruction.reconstructor.Result`. A new quantity is added here, once;
+every writer, reader and widget uses this one table. :class:`OutputSettings` is the
+``outputs:`` section of a run configuration.
 """
 
 from __future__ import annotations
@@ -13,11 +15,22 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
+from pydantic import Field, field_validator
 
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.settings.base import SettingsModel
 from napari_ssdpc.settings.lenslets import HALVES, PAIRS
 
-__all__ = ["CHANNEL_LABELS", "QUANTITIES", "SAVE_CHOICES", "Quantity", "display", "images", "layout", "parse_save"]
+__all__ = [
+    "CHANNEL_LABELS",
+    "QUANTITIES",
+    "SAVE_CHOICES",
+    "OutputSettings",
+    "Quantity",
+    "display",
+    "layout",
+    "parse_save",
+]
 
 
 @dataclass(frozen=True)
@@ -191,31 +204,8 @@ def parse_save(text: str | Iterable[str] | None) -> list[str]:
     return [n for n in SAVE_CHOICES if n in names]
 
 
-def images(result: Any, save: Iterable[str]) -> dict[str, tuple[np.ndarray, str, str]]:
-    """{name: (array, axes, description)}: RI and the requested quantities of one frame.
-
-    Parameters
-    ----------
-    result : Result
-    save : iterable of str
-        Registry names beside RI.
-
-    Returns
-    -------
-    dict
-    """
-    out = {}
-    for name in ["ri", *parse_save(list(save))]:
-        q = QUANTITIES[name]
-        data = q.of(result)
-        if data is None:
-            raise SsdpcError(f"the result holds no {name}: reconstruct with RL stacks (save dpc, stacks or absorption)")
-        out[name] = (data, q.axes, q.description)
-    return out
-
-
 def layout(n_z: int, shape_yx: tuple[int, int], save: Iterable[str]) -> dict[str, tuple[tuple, str, str]]:
-    """{name: (shape per frame, axes, description)} without reconstructing anything.
+    """{name: (shape per frame, axes, description)} of RI and the quantities asked for.
 
     Parameters
     ----------
@@ -261,3 +251,23 @@ def display(key: str) -> tuple[Quantity | None, str]:
             if k == key:
                 return q, f"{q.label} {CHANNEL_LABELS.get(c, c)}"
     return None, key
+
+
+class OutputSettings(SettingsModel):
+    """What is written beside the RI volume (the ``outputs:`` section of a run configuration)."""
+
+    save: tuple[str, ...] = Field((), description=f"quantities beside RI, from: {', '.join(SAVE_CHOICES)}")
+
+    @field_validator("save", mode="before")
+    @classmethod
+    def _known(cls, value: Any) -> Any:
+        if isinstance(value, str):
+            value = [s for s in value.split(",")]
+        if isinstance(value, list | tuple):
+            return tuple(parse_save([str(v) for v in value]))
+        return value
+
+    @property
+    def needs_stacks(self) -> bool:
+        """Whether a saved quantity comes from the Richardson-Lucy stacks."""
+        return any(QUANTITIES[s].needs_stacks for s in self.save)

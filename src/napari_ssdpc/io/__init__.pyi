@@ -1,0 +1,16 @@
+from .frame_source import FrameSource
+from .frames import create_ome_zarr, read_frame, read_ome_zarr, write_ome_tiff, write_ome_tiffs
+from .store import done_frames, open_store, read_complete, write_frame
+
+__all__ = [
+    "FrameSource",
+    "create_ome_zarr",
+    "done_frames",
+    "open_store",
+    "read_complete",
+    "read_frame",
+    "read_ome_zarr",
+    "write_frame",
+    "write_ome_tiff",
+    "write_ome_tiffs",
+]

@@ -1,0 +1,242 @@
+"""The frame loop: one object takes a frame source and writes results to a sink.
+
+For every frame not yet done: read it, reconstruct it (the Reconstructor checks the frame once,
+extracts its views once and checks the result before anything is written), write it. The CLI, the
+napari widgets, the benchmark and the Dask runner all go through :class:`Pipeline`. A source of
+unknown length (:class:`~.sources.LiveFrames`) is followed until it is finished.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass, field
+
+from napari_ssdpc.errors import Cancelled, SsdpcError
+from napari_ssdpc.pipeline.job import Job
+from napari_ssdpc.pipeline.sinks import OutputGrid, Sink
+from napari_ssdpc.pipeline.sources import FrameSource, as_source
+
+__all__ = ["Pipeline", "RunReport", "process_frame"]
+
+#: How long the loop waits for a live source's next frame before it checks for a stop, s.
+POLL_S = 0.2
+
+
+@dataclass
+class RunReport:
+    """What a run did.
+
+    Attributes
+    ----------
+    frames : int
+        Frames in the source at the end.
+    written : int
+        Frames reconstructed and written by this run.
+    skipped : int
+        Frames already done by an earlier run (resumed).
+    seconds : float
+        Wall time of this run's frames, s.
+    build_seconds : float
+        Time to build the operators, s.
+    timings : list of dict
+        Per frame, as :func:`process_frame` returns them.
+    """
+
+    frames: int
+    written: int
+    skipped: int
+    seconds: float
+    build_seconds: float
+    timings: list = field(default_factory=list)
+
+    @property
+    def frames_per_second(self) -> float:
+        """Frames written per second of this run (NaN when none took time)."""
+        return self.written / self.seconds if self.seconds > 0 else float("nan")
+
+
+def process_frame(rec, source: FrameSource, t: int, sink: Sink, *, warm=None, progress=None, should_stop=None):
+    """Read frame t, reconstruct it and write it (serially and on Dask workers).
+
+    Parameters
+    ----------
+    rec : Reconstructor
+    source : FrameSource
+    t : int
+        Frame index.
+    sink : Sink
+        Opened.
+    warm : Solution, optional
+        Start of an iterative method (the previous frame's solution).
+    progress, should_stop : callable, optional
+        Per iteration (see :meth:`Reconstructor.reconstruct`).
+
+    Returns
+    -------
+    timing : dict
+        ``t`` and the seconds spent reading, reconstructing and writing (plus the solver's).
+    result : Result
+    """
+    t0 = time.perf_counter()
+    frame = source[t]
+    t1 = time.perf_counter()
+    result = rec.reconstruct(
+        frame, warm=warm, progress=progress, should_stop=should_stop, name=f"{source.name} frame {t}"
+    )
+    t2 = time.perf_counter()
+    write = sink.write(t, result)
+    timing = {"t": int(t), "read_s": t1 - t0, "reconstruct_s": t2 - t1, "write_s": write, **result.timings}
+    return timing, result
+
+
+class Pipeline:
+    """One job, built once; :meth:`run` streams any frame source into any sink.
+
+    Parameters
+    ----------
+    job : Job
+        Configuration, calibration and flat.
+    reconstructor : Reconstructor, optional
+        Already built from this job (napari keeps one between runs).
+    progress : callable, optional
+        ``progress(done, total, label)`` while the operators are built.
+    workers : int, optional
+        Local Dask worker processes (frames of a file into a store, in parallel).
+    scheduler : str, optional
+        Address of a running Dask scheduler.
+    """
+
+    def __init__(self, job: Job, *, reconstructor=None, progress=None, workers=None, scheduler=None):
+        if workers is not None and workers < 1:
+            raise SsdpcError(f"--workers must be >= 1, got {workers}")
+        self.job = job
+        self.distributed = workers is not None or scheduler is not None
+        self.workers, self.scheduler = workers, scheduler
+        self.reconstructor = reconstructor
+        if reconstructor is None and not self.distributed:
+            self.reconstructor = job.build(progress)
+
+    def run(
+        self,
+        source,
+        sink: Sink,
+        *,
+        progress: bool | None = None,
+        on_frame=None,
+        iteration_progress=None,
+        should_stop=None,
+        stop_after: int | None = None,
+        warm_start: bool = False,
+    ) -> RunReport:
+        """Reconstruct every frame of ``source`` that ``sink`` does not hold yet.
+
+        Parameters
+        ----------
+        source : FrameSource, str, Path or array
+            Raw frames (t, y, x) or one frame (y, x).
+        sink : Sink
+        progress : bool, optional
+            A tqdm bar of the frames on stderr (default: for series of more than one frame).
+        on_frame : callable, optional
+            ``on_frame(t, done, total, result)`` after each frame is written (``total`` None
+            for a live source); raising there stops the run between frames.
+        iteration_progress : callable, optional
+            ``progress(done, total, label)`` within each frame.
+        should_stop : callable, optional
+            True stops the run (:class:`~napari_ssdpc.errors.Cancelled`).
+        stop_after : int, optional
+            Process at most this many pending frames (a partial run, for tests and previews).
+        warm_start : bool
+            Start every frame's iterative solve from the previous frame's solution.
+
+        Returns
+        -------
+        RunReport
+        """
+        source = as_source(source)
+        cal_shape = tuple(self.job.calibration.frame_shape)
+        if tuple(source.frame_shape) != cal_shape:
+            raise SsdpcError(
+                f"{source.name}: the frame shape {tuple(source.frame_shape)} differs from the calibration's "
+                f"{cal_shape}; use the calibration of this camera ROI"
+            )
+        if self.distributed:
+            from napari_ssdpc.pipeline.distributed import run_on_dask
+
+            return run_on_dask(self, source, sink, progress=progress is not False, stop_after=stop_after)
+        rec = self.reconstructor
+        done = sink.open(self.job, OutputGrid.of(rec), source)
+        try:
+            return self._loop(
+                rec, source, sink, done, progress, on_frame, iteration_progress, should_stop, stop_after, warm_start
+            )
+        finally:
+            sink.close()
+
+    def _loop(
+        self, rec, source, sink, done, progress, on_frame, iteration_progress, should_stop, stop_after, warm_start
+    ):
+        total = source.available() if source.finished() else None
+        show = progress if progress is not None else (total is None or total > 1)
+        bar = frame_bar(total, len(done), show)
+        t0, timings, warm, t = time.perf_counter(), [], None, 0
+        limit = float("inf") if stop_after is None else int(stop_after)
+        try:
+            while len(timings) < limit:
+                if should_stop is not None and should_stop():
+                    raise Cancelled("reconstruction cancelled")
+                if t >= source.available():
+                    if source.finished():
+                        break
+                    source.wait(POLL_S)
+                    continue
+                if t not in done:
+                    timing, result = process_frame(
+                        rec,
+                        source,
+                        t,
+                        sink,
+                        warm=warm,
+                        progress=iteration_progress,
+                        should_stop=should_stop,
+                    )
+                    timings.append(timing)
+                    warm = result.solution if warm_start else None
+                    bar.update(1)
+                    if on_frame is not None:
+                        on_frame(t, len(done) + len(timings), total, result)
+                t += 1
+        finally:
+            bar.close()
+        frames = source.available()
+        return RunReport(frames, len(timings), len(done), time.perf_counter() - t0, rec.build_seconds, timings)
+
+
+def frame_bar(total, initial, show):
+    """A tqdm bar of frames on stderr.
+
+    Parameters
+    ----------
+    total : int or None
+        Frames (None: unknown).
+    initial : int
+        Frames already done.
+    show : bool
+
+    Returns
+    -------
+    tqdm.tqdm
+    """
+    from tqdm.auto import tqdm
+
+    return tqdm(
+        total=total,
+        initial=initial,
+        desc="frames",
+        unit="frame",
+        file=sys.stderr,
+        dynamic_ncols=True,
+        disable=not show,
+        smoothing=0.1,
+    )

@@ -1,0 +1,310 @@
+"""Where the frame loop puts its results: memory, OME-TIFF files, a resumable OME-Zarr store.
+
+A sink is opened once with the output grid and the source (it returns the frames it holds
+already: a store being resumed), takes every frame's result, and is closed at the end, also
+after an error. Storage itself (the files' formats, the store's stamp and lock) is in
+:mod:`napari_ssdpc.io`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.io.frames import write_ome_tiffs
+from napari_ssdpc.io.store import StoreLock, open_store, write_frame
+from napari_ssdpc.settings.outputs import layout, parse_save
+
+__all__ = ["MemorySink", "OmeTiffSink", "OutputGrid", "Sink", "ZarrSink"]
+
+
+@dataclass(frozen=True)
+class OutputGrid:
+    """The grid every frame's result lies on.
+
+    Attributes
+    ----------
+    z_um, y_um, x_um : ndarray
+        Plane and pixel centres, µm (y = x = 0 on the optical axis).
+    settings : dict
+        The reconstructor's settings, for the metadata.
+    build_seconds : float
+        Time the operators took, s.
+    """
+
+    z_um: np.ndarray
+    y_um: np.ndarray
+    x_um: np.ndarray
+    settings: dict
+    build_seconds: float = 0.0
+
+    @classmethod
+    def of(cls, rec) -> OutputGrid:
+        """The grid of a Reconstructor.
+
+        Parameters
+        ----------
+        rec : Reconstructor
+
+        Returns
+        -------
+        OutputGrid
+        """
+        return cls(rec.z_um, rec.y_um, rec.x_um, rec.settings(), rec.build_seconds)
+
+    @property
+    def voxel_um(self) -> tuple[float, float, float]:
+        """(dz, dy, dx), µm."""
+        dy = float(self.y_um[1] - self.y_um[0])
+        return float(self.settings.get("dz_um", 1.0)), dy, float(self.x_um[1] - self.x_um[0])
+
+    @property
+    def origin_um(self) -> tuple[float, float, float]:
+        """(z, y, x) of the first voxel, µm."""
+        return float(self.z_um[0]), float(self.y_um[0]), float(self.x_um[0])
+
+    def layout(self, save) -> dict:
+        """{name: (shape per frame, axes, description)} of RI and ``save``.
+
+        Parameters
+        ----------
+        save : iterable of str
+            Quantities beside RI.
+
+        Returns
+        -------
+        dict
+        """
+        return layout(len(self.z_um), (len(self.y_um), len(self.x_um)), save)
+
+
+class Sink(Protocol):
+    """What the frame loop writes to."""
+
+    def open(self, job, grid: OutputGrid, source) -> set[int]:
+        """Prepare for the source's frames; return the frames already held (resumed).
+        Parameters
+        ----------
+        job : Job
+            What the frames are reconstructed with (its ``result_key`` stamps a store).
+        grid : OutputGrid
+        source : FrameSource
+
+        Returns
+        -------
+        set of int
+        """
+
+    def write(self, t: int, result) -> float:
+        """Keep frame ``t``'s Result; return the seconds it took.
+        Parameters
+        ----------
+        t : int
+            Frame index.
+        result : Result
+
+        Returns
+        -------
+        float
+            Seconds spent writing.
+        """
+
+    def close(self) -> None:
+        """Release what :meth:`open` took (also after an error)."""
+
+
+class MemorySink:
+    """Results kept in memory, in frame order.
+
+    Parameters
+    ----------
+    keep : callable, optional
+        What to keep of each Result (default: the Result itself).
+    """
+
+    def __init__(self, keep: Callable[[Any], Any] | None = None):
+        self.keep = keep or (lambda r: r)
+        self.frames: dict[int, Any] = {}
+        self.grid: OutputGrid | None = None
+
+    def open(self, job, grid, source) -> set[int]:
+        """Nothing held yet.
+        Parameters
+        ----------
+        job : Job
+            What the frames are reconstructed with (its ``result_key`` stamps a store).
+        grid : OutputGrid
+        source : FrameSource
+
+        Returns
+        -------
+        set of int
+        """
+        self.grid = grid
+        return set()
+
+    def write(self, t, result) -> float:
+        """Keep what ``keep`` takes of the result.
+        Parameters
+        ----------
+        t : int
+            Frame index.
+        result : Result
+
+        Returns
+        -------
+        float
+            Seconds spent writing.
+        """
+        self.frames[int(t)] = self.keep(result)
+        return 0.0
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+    @property
+    def last(self):
+        """The latest frame's kept value (None before the first)."""
+        return self.frames[max(self.frames)] if self.frames else None
+
+
+class OmeTiffSink:
+    """One frame's RI and the saved quantities as OME-TIFF files, written as one unit.
+
+    Parameters
+    ----------
+    paths : dict of str to Path
+        {quantity: file}, 'ri' included.
+    meta : dict, optional
+        Metadata stored with every file.
+    """
+
+    def __init__(self, paths: dict, meta: dict | None = None):
+        self.paths, self.meta = dict(paths), dict(meta or {})
+        self.save = [n for n in self.paths if n != "ri"]
+        self.written: list[Path] = []
+        self.result = None  # the frame's Result, once written
+
+    def open(self, job, grid, source) -> set[int]:
+        """An OME-TIFF holds one frame: a source of several is refused.
+        Parameters
+        ----------
+        job : Job
+            What the frames are reconstructed with (its ``result_key`` stamps a store).
+        grid : OutputGrid
+        source : FrameSource
+
+        Returns
+        -------
+        set of int
+        """
+        if source.available() != 1 or not source.finished():
+            raise SsdpcError(f"{source.name} holds several frames; write a time series to OME-Zarr (-o OUT.zarr)")
+        return set()
+
+    def write(self, t, result) -> float:
+        """Write the files (all or none).
+        Parameters
+        ----------
+        t : int
+            Frame index.
+        result : Result
+
+        Returns
+        -------
+        float
+            Seconds spent writing.
+        """
+        voxel = result.voxel_um
+        meta = {**self.meta, "settings": result.settings, "z_um": result.z_um.tolist()}
+        files = {
+            self.paths[name]: (data, axes, voxel, {**meta, "quantity": what})
+            for name, (data, axes, what) in result.images(self.save).items()
+        }
+        self.written = write_ome_tiffs(files)
+        self.result = result
+        return 0.0
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
+class ZarrSink:
+    """A resumable (t, z, y, x) OME-Zarr store, one chunk per frame (see :mod:`napari_ssdpc.io.store`).
+
+    A rerun with the same input and job skips the frames marked done; one writer at a time.
+
+    Parameters
+    ----------
+    out : str or Path
+        The ``.zarr`` folder.
+    save : iterable of str
+        Quantities beside RI.
+    meta : dict, optional
+        Metadata stored with every image.
+    """
+
+    def __init__(self, out, save=(), meta: dict | None = None):
+        self.out = Path(out)
+        self.save = parse_save(list(save))
+        self.meta = dict(meta or {})
+        self._lock: StoreLock | None = None
+        if not self.out.parent.is_dir():
+            raise SsdpcError(f"output folder does not exist: {self.out.parent} (create it first)")
+        if self.out.exists() and not self.out.is_dir():
+            raise SsdpcError(f"{self.out} exists and is a file, not an OME-Zarr folder; choose a new output path")
+
+    def open(self, job, grid, source) -> set[int]:
+        """Take the lock, create or reopen the store; the frames already done.
+        Parameters
+        ----------
+        job : Job
+            What the frames are reconstructed with (its ``result_key`` stamps a store).
+        grid : OutputGrid
+        source : FrameSource
+
+        Returns
+        -------
+        set of int
+        """
+        n = source.available()
+        if not source.finished():
+            raise SsdpcError(f"{source.name}: a store needs the series' length; follow live frames into memory")
+        layout = grid.layout(self.save)
+        stamp = {
+            "input": source.identity(),
+            "frames": n,
+            "frame_shape": list(source.frame_shape),
+            "recipe": job.result_key,
+            "outputs": sorted(layout),
+        }
+        self._lock = StoreLock(self.out).__enter__()  # one writer per store
+        attrs = {**self.meta, "settings": grid.settings}
+        done = open_store(self.out, n, layout, grid.voxel_um, stamp, attrs, grid.origin_um)
+        return set(np.flatnonzero(done[:] == 1).tolist())
+
+    def write(self, t, result) -> float:
+        """Write the frame's chunks, then mark it done.
+        Parameters
+        ----------
+        t : int
+            Frame index.
+        result : Result
+
+        Returns
+        -------
+        float
+            Seconds spent writing.
+        """
+        return write_frame(self.out, t, result.images(self.save))
+
+    def close(self) -> None:
+        """Release the lock."""
+        if self._lock is not None:
+            self._lock.__exit__(None, None, None)
+            self._lock = None

@@ -1,0 +1,21 @@
+from .backend import get_backend
+from .methods import METHODS, method_class
+from .methods.base import PhaseMethod, Setup, Solution
+from .reconstructor import Reconstructor, Result
+from .regularised import TvInversion
+from .tv_report import TvReport
+from .wotf import WotfInversion
+
+__all__ = [
+    "METHODS",
+    "PhaseMethod",
+    "Reconstructor",
+    "Result",
+    "Setup",
+    "Solution",
+    "TvInversion",
+    "TvReport",
+    "WotfInversion",
+    "get_backend",
+    "method_class",
+]

@@ -1,0 +1,182 @@
+"""From a raw frame to the views' contrast: checked once, extracted once, flat-fielded.
+
+Per frame (paper §2, docs/conventions.md): the frame is checked (shape, light, saturation), the
+dark offset is subtracted, every elemental image is resampled once onto the upright object grid
+(:func:`~napari_ssdpc.calibration.views.extract_views`), the light of every lenslet is checked
+against the flat, and each lit view is divided by its flat (its direct-light background becomes
+1). Lenslets that receive no direct light at this condenser NA (dark field) carry no first-order
+phase signal (docs/conventions.md) and are left out.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from napari_ssdpc.calibration.result import Calibration
+from napari_ssdpc.calibration.saturation import warn_saturation
+from napari_ssdpc.calibration.views import extract_views
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.physics import transfer
+from napari_ssdpc.reconstruction import checks
+from napari_ssdpc.settings.lenslets import HALVES
+from napari_ssdpc.settings.optics import Optics
+
+__all__ = ["ViewContrast", "estimate_dark"]
+
+
+def estimate_dark(frame, calibration: Calibration) -> float:
+    """Dark offset: median of the pixels farther than 1.2 EI radii from every lenslet centre.
+
+    Parameters
+    ----------
+    frame : ndarray, (H, W)
+        Camera units.
+    calibration : Calibration
+
+    Returns
+    -------
+    float
+        Camera units.
+    """
+    dark = checks.dark_pixels(np.asarray(frame, np.float32), calibration)
+    if dark.size < 100:
+        raise SsdpcError("no dark pixels outside the elemental images to estimate the dark offset; pass dark=VALUE")
+    return float(np.median(dark))
+
+
+def _noise(dark) -> float:
+    """Robust standard deviation of the dark pixels (MAD x 1.4826), camera units."""
+    return max(1.4826 * float(np.median(np.abs(dark - np.median(dark)))), 1e-6) if dark.size else 1e-6
+
+
+class ViewContrast:
+    """The flat field and the lit lenslets of one calibration: built once, used for every frame.
+
+    Parameters
+    ----------
+    optics : Optics
+    calibration : Calibration
+    flat : ndarray, (H, W), optional
+        Flat frame (no sample, the raw frames' condenser NA), camera units; None: each view is
+        normalised by its median and the lit lenslets come from the transfer model.
+    dark : float, optional
+        Dark offset, camera units; None: estimated on every frame.
+    min_light : float
+        A lenslet counts as lit when its direct light reaches this fraction of the brightest.
+
+    Attributes
+    ----------
+    lit : ndarray of int, (K_lit,)
+        Indices of the lit lenslets in ``calibration.lenslets``.
+    lenslets : list of Lenslet
+        The lit lenslets.
+    level : ndarray, (K,)
+        Every lenslet's direct light (the flat's median, or the model's I0_k).
+    mask : ndarray of bool, (h, w)
+        The field stop on the view grid.
+    view_mask : ndarray of bool, (K_lit, h, w)
+        Where each lit view holds data.
+    halves : dict of str to list of int
+        The members (indices into ``lenslets``) of the up, down, left and right halves.
+    x_um, y_um : ndarray, (w,), (h,)
+        The view grid, µm from the optical axis.
+    pixel_um : float
+        Object-space pixel, µm.
+    """
+
+    def __init__(self, optics: Optics, calibration: Calibration, flat=None, dark=None, min_light: float = 0.05):
+        self.optics, self.calibration = optics, calibration
+        self.dark = None if dark is None else float(dark)
+        cal = calibration
+        geom = extract_views(np.zeros(cal.frame_shape, np.float32), cal)
+        self.mask = geom.mask
+        self.x_um, self.y_um, self.pixel_um = geom.x_um, geom.y_um, geom.pixel_um
+        fv = None
+        if flat is not None:  # without a flat, each lenslet's direct light comes from the transfer model
+            levels, noise, fv = self._measure(flat, "flat frame")
+            checks.check_flat(levels, noise, optics)
+            fv = np.clip(fv, 0, None)
+        self.level = level = self._direct_light(fv)
+        lit = level >= min_light * level.max()
+        if not lit.any():
+            raise SsdpcError("no lenslet receives direct light; check the flat frame and the condenser NA")
+        self.lit = np.flatnonzero(lit)
+        self.lenslets = [cal.lenslets[i] for i in self.lit]
+        if fv is not None:
+            sub = fv[self.lit]
+            good = sub > 0.3 * np.median(sub[:, self.mask], axis=1)[:, None, None]
+            self.flat: np.ndarray | None = np.where(good, sub, np.inf).astype(np.float32)
+            self.view_mask = good & self.mask
+        else:
+            self.flat = None
+            self.view_mask = np.broadcast_to(self.mask, (len(self.lit),) + self.mask.shape)
+        self.halves = {h: [i for i, ln in enumerate(self.lenslets) if h in ln.halves] for h in HALVES}
+        for h, members in self.halves.items():
+            if not members:
+                raise SsdpcError(
+                    f"no lit lenslet in the '{h}' half: the optical axis is not centred among the "
+                    "lit lenslets; recalibrate on a white frame or change the condenser NA"
+                )
+
+    def _direct_light(self, flat_views):
+        """Each lenslet's direct-light level: measured on the flat, else the model's I0_k."""
+        if flat_views is not None:
+            return np.array([np.median(v[self.mask]) for v in flat_views])
+        shape = self.mask.shape
+        _, _, i0 = transfer.lenslet_transfer_functions(self.optics, self.calibration.lenslets, shape, self.pixel_um)
+        return np.asarray(i0, float)
+
+    def _measure(self, frame, name: str):
+        """Check a raw or flat frame and extract its views once.
+
+        Returns
+        -------
+        levels : ndarray, (K,)
+            Every lenslet's median light above the dark level.
+        noise : float
+            Noise of the dark pixels.
+        views : ndarray, float32, (K, h, w)
+            Dark-subtracted views of every lenslet.
+        """
+        cal = self.calibration
+        img = cal.check_frame(frame, name=name)
+        checks.check_constant(img, name)
+        checks.check_saturated(frame, name)
+        dark_px = checks.dark_pixels(img, cal)
+        if self.dark is None and dark_px.size < 100:
+            raise SsdpcError("no dark pixels outside the elemental images to estimate the dark offset; pass dark=VALUE")
+        dark = float(np.median(dark_px)) if self.dark is None else self.dark
+        views = extract_views(img - dark, cal).data
+        levels = np.array([np.median(v[self.mask]) for v in views])
+        return levels, _noise(dark_px if dark_px.size else img.ravel()), views
+
+    def __call__(self, frame, name: str = "frame") -> np.ndarray:
+        """Dark-subtracted, flat-fielded, non-negative views of the lit lenslets.
+
+        Parameters
+        ----------
+        frame : array_like, (H, W)
+            Raw frame, camera units.
+        name : str
+            For the messages.
+
+        Returns
+        -------
+        ndarray, float32, (K_lit, h, w)
+            1 where a view holds only direct light.
+
+        Raises
+        ------
+        SsdpcError
+            The frame does not fit the calibration, holds no light, is saturated, or is lit
+            unlike the flat (a white frame, another condenser NA).
+        """
+        warn_saturation(frame)
+        levels, noise, all_views = self._measure(frame, name)
+        checks.check_frame_light(levels, noise, self.lit, self.level[self.lit], self.optics, name)
+        views = all_views[self.lit]
+        if self.flat is not None:
+            views = views / self.flat
+        else:
+            views = views / np.array([np.median(v[self.mask]) for v in views])[:, None, None]
+        return np.clip(np.where(self.view_mask, views, 0), 0, None).astype(np.float32)

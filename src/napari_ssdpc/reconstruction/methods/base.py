@@ -1,0 +1,121 @@
+"""The interface every phase method implements, and what it is built from and returns."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from napari_ssdpc.reconstruction.backend import Backend
+from napari_ssdpc.reconstruction.contrast import ViewContrast
+from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.settings.reconstruction import ReconstructionSettings
+
+__all__ = ["PhaseMethod", "Setup", "Solution"]
+
+
+@dataclass
+class Setup:
+    """What a phase method is built from: everything that does not depend on the frame.
+
+    Attributes
+    ----------
+    optics : Optics
+    settings : ReconstructionSettings
+        The method reads its own section (``settings.tv``, ``settings.wotf``, ...).
+    views : ViewContrast
+        The lit lenslets, their direct light, the field stop and the view grid.
+    z_um : ndarray, (Z,)
+        The output planes, µm.
+    backend : Backend
+        NumPy on the CPU or CuPy on a GPU.
+    """
+
+    optics: Optics
+    settings: ReconstructionSettings
+    views: ViewContrast
+    z_um: np.ndarray
+    backend: Backend
+
+    @property
+    def dz_um(self) -> float:
+        """Slab thickness, µm."""
+        return float(self.settings.dz_um)
+
+
+@dataclass
+class Solution:
+    """One frame's phase and what the method did.
+
+    Attributes
+    ----------
+    phase : ndarray, float32, (Z, ny, nx)
+        Phase per slab, rad.
+    report : dict
+        Plain numbers for the result's metadata (iterations, objective, ...).
+    history : dict
+        Convergence curves ({name: list of float}).
+    state : object
+        What a warm start of the next frame reuses (the phase, solver variables).
+    """
+
+    phase: np.ndarray
+    report: dict = field(default_factory=dict)
+    history: dict = field(default_factory=dict)
+    state: Any = None
+
+
+class PhaseMethod(ABC):
+    """A phase method: built once, then ``solve`` per frame.
+
+    Subclasses set :attr:`name` (their key in :data:`~napari_ssdpc.reconstruction.methods.METHODS`)
+    and :attr:`uses_stacks` (whether they take their phase from the directional stacks).
+    """
+
+    name: ClassVar[str]
+    uses_stacks: ClassVar[bool] = False
+
+    @classmethod
+    @abstractmethod
+    def build(cls, setup: Setup, progress=None) -> PhaseMethod:
+        """Build the method's operators.
+
+        Parameters
+        ----------
+        setup : Setup
+        progress : callable, optional
+            ``progress(done, total, label)`` while the operators are built.
+
+        Returns
+        -------
+        PhaseMethod
+        """
+
+    @abstractmethod
+    def solve(self, views, stacks=None, *, warm: Solution | None = None, progress=None, should_stop=None) -> Solution:
+        """The phase of one frame.
+
+        Parameters
+        ----------
+        views : ndarray, float32, (K, ny, nx)
+            Flat-fielded views (1 = direct light), 0 where a view holds no data.
+        stacks : Stacks, optional
+            The frame's directional stacks (methods with :attr:`uses_stacks`).
+        warm : Solution, optional
+            A solution to start from (the previous frame's); iterative methods use it.
+        progress : callable, optional
+            ``progress(done, total, label)`` per iteration.
+        should_stop : callable, optional
+            Checked every iteration; True stops with
+            :class:`~napari_ssdpc.errors.Cancelled`.
+
+        Returns
+        -------
+        Solution
+        """
+
+    def settings(self) -> dict:
+        """The settings this method solves with, for the output metadata."""
+        return {}

@@ -1,0 +1,92 @@
+"""The 'tv' method (default): the views' WOTFs inverted with total variation and constraints.
+
+Started from the Tikhonov solution of the same frame (the 'wotf' inverse on the output planes),
+or from a given warm start (the previous frame of a series); solved by ADMM (:mod:`..regularised`,
+docs/method.md).
+"""
+
+from __future__ import annotations
+
+import math
+
+from napari_ssdpc.errors import Cancelled
+from napari_ssdpc.physics.design import design
+from napari_ssdpc.reconstruction.forward import padded_planes
+from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
+from napari_ssdpc.reconstruction.methods.wotf import contrast_of, view_model
+from napari_ssdpc.reconstruction.regularised import TvInversion
+from napari_ssdpc.reconstruction.wotf import WotfInversion
+
+__all__ = ["TvMethod"]
+
+
+class TvMethod(PhaseMethod):
+    """ADMM with anisotropic TV, sparsity, the sign of Δn, |Δn| ≤ dn_max and the field stop."""
+
+    name = "tv"
+
+    def __init__(self, setup: Setup, wotf: WotfInversion, tv: TvInversion):
+        self.setup, self.wotf, self.tv = setup, wotf, tv
+
+    @classmethod
+    def build(cls, setup: Setup, progress=None) -> TvMethod:
+        """One model of the views on the z grid padded by about R_z on each side; the Tikhonov
+        inverse of its output planes gives the start.
+
+        Parameters
+        ----------
+        setup : Setup
+        progress : callable, optional
+            ``progress(done, total, label)`` while the operators are built.
+
+        Returns
+        -------
+        TvMethod
+        """
+        r_z = float(design(setup.optics)["r_z_ffl_um"])
+        zs, planes = padded_planes(setup.z_um, r_z)
+        model = view_model(setup, zs, progress)
+        wotf = WotfInversion(model.planes(planes), setup.settings.tv.alpha)
+        return cls(setup, wotf, TvInversion(model, planes, r_z, mask=setup.views.mask))
+
+    def solve(self, views, stacks=None, *, warm=None, progress=None, should_stop=None) -> Solution:
+        """The TV phase.
+
+        Parameters
+        ----------
+        views : ndarray, float32, (K, ny, nx)
+            Flat-fielded views.
+        stacks : Stacks, optional
+            The frame's directional stacks (unused).
+        warm : Solution, optional
+            Its phase is the start; without one the solve starts from the frame's
+            Tikhonov solution.
+        progress, should_stop : callable, optional
+            Per iteration.
+
+        Returns
+        -------
+        Solution
+            Phase per slab (Z, ny, nx), rad.
+        """
+        v, t = self.setup.views, self.setup.settings.tv
+        contrast = contrast_of(views, v.view_mask)
+        start = warm.phase if warm is not None else self.wotf.phase(contrast) * v.mask
+        phi, report = self.tv.phase(
+            contrast,
+            warm=start,
+            sign=t.sign,
+            phi_max=2 * math.pi * self.setup.dz_um * t.dn_max / self.setup.optics.wavelength_um,  # Δn = λφ/(2π dz)
+            lam=t.lambda_scale,
+            iterations=t.iterations,
+            progress=None if progress is None else (lambda i, n, *_: progress(i, n, "TV")),
+            should_stop=should_stop,
+        )
+        if should_stop is not None and should_stop():
+            raise Cancelled("reconstruction cancelled")
+        history = {"tv": {"objective": report.objective, "relative_change": report.relative_change}}
+        return Solution(phi, report.to_dict(), history, state=phi)
+
+    def settings(self) -> dict:
+        """The Tikhonov α of the start."""
+        return {"tikhonov_alpha": self.wotf.alpha}

@@ -1,0 +1,105 @@
+"""The 'wotf' method: 3D Tikhonov inversion of all views' weak-object transfer functions."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from napari_ssdpc.reconstruction.forward import ViewModel
+from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
+from napari_ssdpc.reconstruction.wotf import WotfInversion
+
+__all__ = ["WotfMethod", "contrast_of", "view_model"]
+
+
+def view_model(setup: Setup, z_um, progress=None) -> ViewModel:
+    """The views' model (paper Eqs. 2-4) on the planes ``z_um``.
+
+    Parameters
+    ----------
+    setup : Setup
+    z_um : ndarray, (Z,)
+        Planes, µm.
+    progress : callable, optional
+
+    Returns
+    -------
+    ViewModel
+    """
+    v = setup.views
+    return ViewModel(
+        setup.optics,
+        v.lenslets,
+        v.mask.shape,
+        v.pixel_um,
+        z_um,
+        i0=v.level[v.lit],
+        progress=progress,
+        backend=setup.backend,
+    )
+
+
+def contrast_of(views, view_mask) -> np.ndarray:
+    """I_k / I0_k − 1 of every view, 0 where it holds no data.
+
+    Parameters
+    ----------
+    views : ndarray, float32, (K, ny, nx)
+    view_mask : ndarray of bool, (K, ny, nx)
+
+    Returns
+    -------
+    ndarray, (K, ny, nx)
+    """
+    return np.where(view_mask, views - 1.0, 0.0)
+
+
+class WotfMethod(PhaseMethod):
+    """Linear: φ̂(u) = Aᴴ(AAᴴ + αI)⁻¹ ĉ(u) per lateral frequency (:mod:`..wotf`)."""
+
+    name = "wotf"
+
+    def __init__(self, setup: Setup, inversion: WotfInversion):
+        self.setup, self.inversion = setup, inversion
+
+    @classmethod
+    def build(cls, setup: Setup, progress=None) -> WotfMethod:
+        """Build the Tikhonov inverse on the output planes.
+
+        Parameters
+        ----------
+        setup : Setup
+        progress : callable, optional
+            ``progress(done, total, label)`` while the operators are built.
+
+        Returns
+        -------
+        WotfMethod
+        """
+        model = view_model(setup, setup.z_um, progress)
+        return cls(setup, WotfInversion(model, setup.settings.wotf.alpha))
+
+    def solve(self, views, stacks=None, *, warm=None, progress=None, should_stop=None) -> Solution:
+        """The Tikhonov phase.
+
+        Parameters
+        ----------
+        views : ndarray, float32, (K, ny, nx)
+            Flat-fielded views.
+        stacks : Stacks, optional
+            The frame's directional stacks (unused).
+        warm : Solution, optional
+            Unused: the inverse is linear.
+        progress, should_stop : callable, optional
+            Per iteration.
+
+        Returns
+        -------
+        Solution
+            Phase per slab (Z, ny, nx), rad.
+        """
+        v = self.setup.views
+        return Solution(self.inversion.phase(contrast_of(views, v.view_mask)) * v.mask)
+
+    def settings(self) -> dict:
+        """The Tikhonov α."""
+        return {"tikhonov_alpha": self.inversion.alpha}

@@ -1,0 +1,339 @@
+"""The ssDPC reconstruction: one raw frame in, a 3D refractive-index volume out.
+
+Per frame (paper §2 and §3.2, docs/conventions.md):
+1. the frame is checked, its views extracted once and flat-fielded (:mod:`.contrast`);
+2. where the method or the outputs ask for them, the directional stacks (Eq. 5-6), DPC (Eq. 1)
+   and absorption (:mod:`.stacks`);
+3. the phase per slab by the chosen method (:mod:`.methods`: 'tv' by default, 'wotf', 'rl';
+   docs/validation.md compares them), optionally from a warm start;
+4. Δn = λφ/(2π dz) and n = n_medium + Δn.
+
+Everything that does not depend on the frame is built once, from one
+:class:`~napari_ssdpc.settings.config.RunConfig`: each part reads its own section.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from napari_ssdpc.calibration.result import Calibration
+from napari_ssdpc.errors import SsdpcError, SsdpcWarning
+from napari_ssdpc.physics.design import design
+from napari_ssdpc.reconstruction import checks
+from napari_ssdpc.reconstruction.backend import get_backend
+from napari_ssdpc.reconstruction.contrast import ViewContrast
+from napari_ssdpc.reconstruction.dpc import phase_to_delta_n, refractive_index
+from napari_ssdpc.reconstruction.methods import method_class
+from napari_ssdpc.reconstruction.methods.base import Setup, Solution
+from napari_ssdpc.reconstruction.stacks import DirectionalStacks
+from napari_ssdpc.settings.config import RunConfig
+from napari_ssdpc.settings.outputs import QUANTITIES, layout
+from napari_ssdpc.settings.reconstruction import plane_count
+
+__all__ = ["Reconstructor", "Result", "z_grid"]
+
+
+def z_grid(z_min_um: float, z_max_um: float, dz_um: float) -> np.ndarray:
+    """Planes from z_min to z_max (inclusive) every dz µm.
+
+    Parameters
+    ----------
+    z_min_um, z_max_um : float
+        First and last plane, µm from the focal plane.
+    dz_um : float
+        Spacing, µm.
+
+    Returns
+    -------
+    ndarray, float64, (Z,)
+    """
+    if not dz_um > 0:
+        raise SsdpcError(f"dz must be > 0 µm, got {dz_um}")
+    if z_max_um < z_min_um:
+        raise SsdpcError(f"z range is empty: z_max {z_max_um} < z_min {z_min_um}; give --z ZMIN ZMAX with ZMIN <= ZMAX")
+    n = plane_count(z_min_um, z_max_um, dz_um)
+    return (z_min_um + dz_um * np.arange(n)).astype(np.float64)
+
+
+@dataclass
+class Result:
+    """Reconstruction of one frame. Arrays are (z, y, x) with coordinates in µm."""
+
+    ri: np.ndarray
+    delta_n: np.ndarray
+    phase: np.ndarray
+    absorption: np.ndarray | None
+    dpc: dict
+    stacks: dict
+    z_um: np.ndarray
+    y_um: np.ndarray
+    x_um: np.ndarray
+    convergence: dict = field(default_factory=dict)
+    timings: dict = field(default_factory=dict)
+    settings: dict = field(default_factory=dict)
+    solution: Solution | None = None
+
+    @property
+    def voxel_um(self) -> tuple[float, float, float]:
+        """(dz, dy, dx) in µm; dz of a single plane is the slab thickness it was made with."""
+        dz = float(self.z_um[1] - self.z_um[0]) if len(self.z_um) > 1 else float(self.settings.get("dz_um", 1.0))
+        return dz, float(self.y_um[1] - self.y_um[0]), float(self.x_um[1] - self.x_um[0])
+
+    @property
+    def projected_phase(self) -> np.ndarray:
+        """(y, x) phase summed over the slabs, rad: what a 2D quantitative phase image shows."""
+        return np.asarray(np.sum(self.phase, axis=0, dtype=np.float64), np.float32)
+
+    @property
+    def opd_nm(self) -> np.ndarray:
+        """(y, x) optical path difference Σ_z Δn dz, nm."""
+        return np.asarray(1e3 * self.voxel_um[0] * np.sum(self.delta_n, axis=0, dtype=np.float64), np.float32)
+
+    def images(self, save=()) -> dict[str, tuple[np.ndarray, str, str]]:
+        """{name: (array, axes, description)}: RI and the quantities asked for, as written.
+
+        Parameters
+        ----------
+        save : iterable of str
+            Registry names beside RI (:data:`~napari_ssdpc.settings.outputs.QUANTITIES`).
+
+        Returns
+        -------
+        dict
+        """
+        out = {}
+        for name, (_, axes, what) in layout(len(self.z_um), self.phase.shape[1:], save).items():
+            data = QUANTITIES[name].of(self)
+            if data is None:
+                raise SsdpcError(f"the result holds no {name}: reconstruct with the directional stacks")
+            out[name] = (data, axes, what)
+        return out
+
+    @property
+    def dry_mass(self) -> np.ndarray:
+        """(y, x) dry-mass surface density OPD / α, pg/µm² (α: the specific refraction increment)."""
+        alpha = float(self.settings.get("refraction_increment_um3_pg", 0.19))
+        return (1e-3 * self.opd_nm / alpha).astype(np.float32)
+
+
+class Reconstructor:
+    """Everything computed once per run configuration, calibration and flat: the checks, the lit
+    lenslets and flat field, the directional stacks' operators (when asked for) and the phase
+    method's operators; then :meth:`reconstruct` frame after frame.
+
+    Parameters
+    ----------
+    config : RunConfig
+        The optics, the reconstruction settings (the method reads its own section) and the
+        outputs (whether the directional stacks are needed).
+    calibration : Calibration
+        Of the camera that recorded the frames.
+    flat : ndarray, (H, W), optional
+        Flat frame at the raw frames' condenser NA, camera units.
+    dark : float, optional
+        Dark offset, camera units; None: estimated on every frame.
+    stacks : bool
+        Compute the directional stacks even where no output needs them.
+    progress : callable, optional
+        ``progress(done, total, label)`` while the operators are built.
+    min_light : float
+        A lenslet counts as lit at this fraction of the brightest's direct light.
+    check_memory : bool
+        Refuse settings whose operators do not fit in the free memory.
+    backend : Backend, optional
+        An array backend instead of the one ``reconstruction.device`` names.
+    """
+
+    def __init__(
+        self,
+        config: RunConfig,
+        calibration: Calibration,
+        *,
+        flat=None,
+        dark=None,
+        stacks: bool = False,
+        progress=None,
+        min_light: float = 0.05,
+        check_memory: bool = True,
+        backend=None,
+    ):
+        if not isinstance(config, RunConfig):
+            raise SsdpcError(
+                f"Reconstructor takes a RunConfig (optics, reconstruction, outputs), got {type(config).__name__}; "
+                "use RunConfig.of(optics, ...)"
+            )
+        # the backend first: no operators are built for a device that is not there
+        self.backend = get_backend(config.reconstruction.device) if backend is None else backend
+        if not isinstance(calibration, Calibration):
+            raise SsdpcError(
+                f"Reconstructor takes a Calibration, got {type(calibration).__name__}; "
+                "read one with Calibration.from_json(path) or make one with calibrate(white, optics)"
+            )
+        t0 = time.perf_counter()
+        self.config, self.calibration = config, calibration
+        self.optics = optics = config.optics
+        settings = config.reconstruction
+        method = method_class(settings.method)
+        with_stacks = bool(stacks) or config.outputs.needs_stacks or method.uses_stacks
+        checks.check_optics_match(optics, calibration, "optics")
+        if check_memory:
+            checks.check_memory(optics, calibration, settings, with_stacks)
+        self.dz = float(settings.dz_um)
+        self.z_um = z_grid(settings.z_min_um, settings.z_max_um, self.dz)
+        self._check_depth_of_field()
+        self.views = v = ViewContrast(optics, calibration, flat, dark, min_light)
+        self.stacks = None
+        if with_stacks:
+            self.stacks = DirectionalStacks(
+                optics,
+                v.lenslets,
+                v.halves,
+                v.view_mask,
+                v.mask,
+                v.pixel_um,
+                self.z_um,
+                settings.rl,
+                self.backend,
+                progress,
+            )
+        self._setup = Setup(optics, settings, v, self.z_um, self.backend)
+        self.method = method.build(self._setup, progress)
+        self.build_seconds = time.perf_counter() - t0
+
+    def adopt(self, config: RunConfig) -> bool:
+        """Take ``config`` for the next frames if its operators are these (only runtime keys differ).
+
+        Parameters
+        ----------
+        config : RunConfig
+
+        Returns
+        -------
+        bool
+            False where the operators would differ: build a new Reconstructor.
+        """
+        same = config.optics == self.optics and (
+            config.reconstruction.operator_key() == self.config.reconstruction.operator_key()
+        )
+        if not same or (config.outputs.needs_stacks and self.stacks is None):
+            return False
+        self.config = config
+        self._setup.settings = config.reconstruction
+        if self.stacks is not None:
+            self.stacks.settings = config.reconstruction.rl
+        return True
+
+    # the views' geometry, for writers and widgets
+    @property
+    def lit(self) -> np.ndarray:
+        """Indices of the lit lenslets in the calibration."""
+        return self.views.lit
+
+    @property
+    def lenslets(self) -> list:
+        """The lit lenslets, in the order of the views."""
+        return self.views.lenslets
+
+    @property
+    def mask(self) -> np.ndarray:
+        """The field stop on the view grid, (ny, nx) bool."""
+        return self.views.mask
+
+    @property
+    def pixel_um(self) -> float:
+        """Object-space pixel, µm."""
+        return self.views.pixel_um
+
+    @property
+    def y_um(self) -> np.ndarray:
+        """(ny,) µm from the optical axis."""
+        return self.views.y_um
+
+    @property
+    def x_um(self) -> np.ndarray:
+        """(nx,) µm from the optical axis."""
+        return self.views.x_um
+
+    def _check_depth_of_field(self):
+        dof = design(self.optics)["dof_um"]
+        reach = max(abs(self.z_um[0]), abs(self.z_um[-1]))
+        if reach > dof / 2:
+            warnings.warn(
+                f"z range reaches {reach:.0f} µm, beyond the depth of field ±{dof / 2:.0f} µm: "
+                "planes out there are poorly determined; narrow --z",
+                SsdpcWarning,
+                stacklevel=3,
+            )
+
+    # ---------------------------------------------------------- per frame
+    def reconstruct(
+        self, frame, *, warm: Solution | None = None, progress=None, should_stop=None, name="frame"
+    ) -> Result:
+        """The RI volume of one raw frame (and whatever else the outputs ask for).
+
+        Parameters
+        ----------
+        frame : array_like, (H, W)
+            Raw frame, camera units.
+        warm : Solution, optional
+            The previous frame's solution (``result.solution``): iterative methods start there.
+        progress : callable, optional
+            ``progress(done, total, label)`` per iteration.
+        should_stop : callable, optional
+            Checked every iteration; True stops with :class:`~napari_ssdpc.errors.Cancelled`.
+        name : str
+            The frame's name in error messages.
+
+        Returns
+        -------
+        Result
+            RI, Δn and phase volumes (z, y, x) on the µm grid, the 2D maps, the settings and timings.
+
+        Raises
+        ------
+        SsdpcError
+            The frame does not fit the calibration or the flat, or the result is not finite or
+            beyond any sample.
+        """
+        t0 = time.perf_counter()
+        views = self.views(frame, name)
+        t1 = time.perf_counter()
+        stacks = None if self.stacks is None else self.stacks(views, progress=progress, should_stop=should_stop)
+        t2 = time.perf_counter()
+        sol = self.method.solve(views, stacks, warm=warm, progress=progress, should_stop=should_stop)
+        phase = np.asarray(sol.phase, np.float32)
+        dn = phase_to_delta_n(phase, self.optics.wavelength_um, self.dz)
+        checks.check_result(dn, self.optics, name=f"volume of {name}")
+        t3 = time.perf_counter()
+        history = {**({} if stacks is None else stacks.history), **sol.history}
+        return Result(
+            ri=refractive_index(phase, self.optics.wavelength_um, self.dz, self.optics.medium_index),
+            delta_n=dn,
+            phase=phase,
+            absorption=None if stacks is None else stacks.absorption,
+            dpc={} if stacks is None else stacks.dpc,
+            stacks={} if stacks is None else stacks.stacks,
+            z_um=self.z_um.copy(),
+            y_um=self.y_um.copy(),
+            x_um=self.x_um.copy(),
+            convergence=history,
+            timings={"preprocess_s": t1 - t0, "rl_s": t2 - t1, "phase_s": t3 - t2},
+            settings={**self.settings(), **sol.report},
+            solution=sol,
+        )
+
+    def settings(self) -> dict:
+        """The settings this reconstructor solves with, for the output metadata: the reconstruction
+        settings (every section), the z grid as built, the method's own numbers, the lit lenslets."""
+        return {
+            **self.config.reconstruction.to_dict(),
+            "z_min_um": float(self.z_um[0]),
+            "z_max_um": float(self.z_um[-1]),
+            "dz_um": self.dz,
+            **self.method.settings(),
+            "lenslets_used": [[ln.row, ln.col] for ln in self.lenslets],
+        }
