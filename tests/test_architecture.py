@@ -8,13 +8,20 @@ import pytest
 PKG = Path(__file__).resolve().parents[1] / "src" / "napari_ssdpc"
 GUI = ("napari", "magicgui", "qtpy", "PyQt5", "PyQt6", "PySide2", "PySide6", "superqt", "vispy")
 #: layer -> layers it must not import
+_TOP = ("cli", "_napari", "validation")
 FORBIDDEN = {
-    "settings": ("physics", "calibration", "reconstruction", "simulation", "io", "cli", "_napari", "validation"),
-    "physics": ("calibration", "reconstruction", "simulation", "io", "cli", "_napari", "validation"),
-    "calibration": ("reconstruction", "simulation", "io", "cli", "_napari", "validation"),
-    "reconstruction": ("simulation", "io", "cli", "_napari", "validation"),
-    "simulation": ("reconstruction", "io", "cli", "_napari", "validation"),
-    "io": ("cli", "_napari", "validation"),
+    "settings": ("physics", "calibration", "reconstruction", "simulation", "io", "pipeline", *_TOP),
+    "physics": ("calibration", "reconstruction", "simulation", "io", "pipeline", *_TOP),
+    "calibration": ("reconstruction", "simulation", "io", "pipeline", *_TOP),
+    "reconstruction": ("simulation", "io", "pipeline", *_TOP),
+    "simulation": ("reconstruction", "io", "pipeline", *_TOP),
+    # storage only reads and writes: it knows no solver and no frame loop
+    "io": ("physics", "calibration", "reconstruction", "simulation", "pipeline", *_TOP),
+    # the frame loop runs on measured frames: it knows no simulator and no user interface
+    "pipeline": ("simulation", *_TOP),
+    "cli": ("_napari",),
+    "_napari": ("cli",),
+    "validation": ("cli", "_napari"),
 }
 
 
@@ -99,18 +106,42 @@ def test_public_definitions_have_numpydoc_docstrings(path):
 PACKAGES = sorted(p.parent for p in PKG.glob("*/__init__.py"))
 
 
-@pytest.mark.parametrize("package", PACKAGES, ids=lambda p: p.name)
+def _declared_api(package: Path) -> tuple[list[str] | None, set[str]]:
+    """``__all__`` as the package's ``__init__`` declares it, and the names its imports bind.
+
+    A lazily loaded package declares both in its stub ``__init__.pyi`` (read by lazy_loader at
+    run time and by type checkers); an eager one in ``__init__.py``.
+    """
+    stub = package / "__init__.pyi"
+    tree = ast.parse((stub if stub.exists() else package / "__init__.py").read_text())
+    declared, bound = None, set()
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "__all__" for t in node.targets):
+            declared = list(ast.literal_eval(node.value))
+        elif isinstance(node, ast.ImportFrom):
+            bound |= {a.asname or a.name for a in node.names}
+    return declared, bound
+
+
+@pytest.mark.parametrize("package", [PKG, *PACKAGES], ids=lambda p: p.name)
 def test_every_package_declares_its_public_api(package):
-    """Each package names what it offers (``__all__``), and every name it lists can be had from it."""
+    """Each package names what it offers (``__all__``, in ``__init__.pyi`` where it loads lazily),
+    lists every name it imports, and every name it lists can be had from it."""
     import importlib
 
+    declared, bound = _declared_api(package)
+    where = "__init__.pyi" if (package / "__init__.pyi").exists() else "__init__.py"
+    assert declared, f"{package.name}/{where} declares no __all__"
+    if where == "__init__.pyi":
+        differ = sorted(set(declared) ^ bound)
+        assert not differ, f"{package.name}/{where}: __all__ and the imports differ in {differ}"
     if package.name == "_napari":
         pytest.importorskip("napari")
-    mod = importlib.import_module(f"napari_ssdpc.{package.name}")
-    names = getattr(mod, "__all__", None)
-    assert names, f"{package.name}/__init__.py has no __all__"
+    name = "napari_ssdpc" if package == PKG else f"napari_ssdpc.{package.name}"
+    mod = importlib.import_module(name)
+    assert sorted(getattr(mod, "__all__", [])) == sorted(declared), f"{name}.__all__ is not the declared one"
     missing = []
-    for name in names:
+    for name in declared:
         try:
             getattr(mod, name) if hasattr(mod, name) else importlib.import_module(f"{mod.__name__}.{name}")
         except (AttributeError, ImportError):
@@ -146,3 +177,71 @@ def test_modules_stay_small(path):
     """One concern per module: none holds more than MAX_CODE_LINES lines of code."""
     n = _code_lines(path)
     assert n <= MAX_CODE_LINES, f"{path.name}: {n} lines of code (at most {MAX_CODE_LINES}); split it by concern"
+
+
+def _tree(path: Path):
+    return ast.parse(path.read_text())
+
+
+@pytest.mark.parametrize("path", MODULES, ids=lambda p: str(p.relative_to(PKG)))
+def test_imports_name_the_defining_module(path):
+    """Absolute imports only (a name's home reads the same everywhere; the ``__init__.pyi`` stubs
+    of the lazy packages are the one place for relative ones)."""
+    relative = [n.module for n in ast.walk(_tree(path)) if isinstance(n, ast.ImportFrom) and n.level > 0]
+    assert not relative, f"{path.relative_to(PKG)} imports relatively: {relative}"
+
+
+@pytest.mark.parametrize("path", [p for p in MODULES if p.name != "__init__.py"], ids=lambda p: str(p.relative_to(PKG)))
+def test_no_module_re_exports_what_it_imports(path):
+    """A module's ``__all__`` lists only what it defines: one import path per public name."""
+    tree = _tree(path)
+    defined, declared = set(), []
+    for node in tree.body:
+        if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+            defined.add(node.name)
+        elif isinstance(node, ast.Assign):
+            for t in node.targets:
+                if isinstance(t, ast.Name) and t.id == "__all__":
+                    declared = list(ast.literal_eval(node.value))
+                defined |= {n.id for n in ast.walk(t) if isinstance(n, ast.Name)}
+        elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+            defined.add(node.target.id)
+    foreign = sorted(set(declared) - defined)
+    assert not foreign, f"{path.relative_to(PKG)} re-exports {foreign}: import them from their own module"
+
+
+def _calls(path: Path, names) -> list[str]:
+    found = []
+    for node in ast.walk(_tree(path)):
+        if isinstance(node, ast.Call):
+            f = node.func
+            name = f.attr if isinstance(f, ast.Attribute) else getattr(f, "id", "")
+            if name in names:
+                found.append(f"{name} (line {node.lineno})")
+    return found
+
+
+@pytest.mark.parametrize("layer", ["cli", "_napari"])
+def test_the_user_interfaces_run_frames_through_the_pipeline(layer):
+    """The CLI and napari reconstruct through :class:`napari_ssdpc.pipeline.run.Pipeline`: neither
+    builds a Reconstructor, reconstructs a frame or writes a series store itself."""
+    direct = {"Reconstructor", "reconstruct", "write_frame", "open_store", "process_frame"}
+    for path in sorted((PKG / layer).rglob("*.py")):
+        found = _calls(path, direct)
+        assert not found, f"{path.relative_to(PKG)} calls {found}: run frames through pipeline.run.Pipeline"
+
+
+def test_every_phase_method_is_registered_and_implements_the_interface():
+    """The settings' method choices, the registry and the modules agree; every method is a
+    PhaseMethod whose name is its key."""
+    from napari_ssdpc.reconstruction.methods import METHODS, method_class
+    from napari_ssdpc.reconstruction.methods.base import PhaseMethod
+    from napari_ssdpc.settings.reconstruction import PHASE_METHODS, ReconstructionSettings
+
+    assert tuple(METHODS) == PHASE_METHODS
+    for name in METHODS:
+        cls = method_class(name)
+        assert issubclass(cls, PhaseMethod) and cls.name == name
+        assert name in ReconstructionSettings.model_fields, f"no settings section '{name}'"
+    modules = {p.stem for p in (PKG / "reconstruction" / "methods").glob("*.py")} - {"__init__", "base"}
+    assert modules == {e.module.rsplit(".", 1)[1] for e in METHODS.values()}, "a method module is not registered"

@@ -15,19 +15,15 @@ import warnings
 import numpy as np
 import pytest
 
-from napari_ssdpc.calibration.calibrate import (
-    CALIBRATION_VERSION,
-    Calibration,
-    calibrate,
-    extract_views,
-    insert_views,
-    overlay_png,
-)
+from napari_ssdpc.calibration import Calibration, calibrate, extract_views, insert_views, overlay_png
+from napari_ssdpc.calibration.result import CALIBRATION_VERSION
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation.multislice import Source
-from napari_ssdpc.simulation.phantoms import Box, Composite, pmma_bead
+from napari_ssdpc.simulation.phantom_base import Composite
+from napari_ssdpc.simulation.phantoms import pmma_bead
+from napari_ssdpc.simulation.primitives import Box
 from napari_ssdpc.simulation.sample_free import flat_frame, flat_intensity, white_frame, white_intensity
 from napari_ssdpc.simulation.simulate import simulate
 

@@ -145,7 +145,7 @@ def test_outputs_are_compared_with_inputs_after_resolving(tmp_path, monkeypatch)
 
 @pytest.mark.parametrize("frames", [1, 3])
 def test_a_half_truncated_tiff_is_refused_by_both_readers(tmp_path, frames):
-    from napari_ssdpc.io.frame_source import FrameSource
+    from napari_ssdpc.io.frame_source import StoredFrames
 
     a = np.arange(frames * 64 * 80, dtype="u2").reshape(frames, 64, 80).squeeze()
     full, half = tmp_path / "full.tif", tmp_path / "half.tif"
@@ -154,5 +154,5 @@ def test_a_half_truncated_tiff_is_refused_by_both_readers(tmp_path, frames):
     with pytest.raises(SsdpcError, match="complete TIFF"):
         read_frame(half)
     with pytest.raises(SsdpcError, match="truncated"):
-        FrameSource(half)
-    np.testing.assert_array_equal(FrameSource(full)[frames - 1], a if frames == 1 else a[-1])
+        StoredFrames(half)
+    np.testing.assert_array_equal(StoredFrames(full)[frames - 1], a if frames == 1 else a[-1])

@@ -13,7 +13,7 @@ import tifffile
 
 from napari_ssdpc.cli.main import main
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.io.frame_source import FrameSource, PagedSeries
+from napari_ssdpc.io.frame_source import PagedSeries, StoredFrames
 from napari_ssdpc.io.frames import read_ome_zarr
 from napari_ssdpc.io.store import done_frames
 from napari_ssdpc.pipeline.job import Job
@@ -111,9 +111,9 @@ def test_frames_are_streamed_not_loaded(data, recipe, rec, tmp_path):
     plain, packed = tmp_path / "plain.tif", tmp_path / "packed.tif"
     tifffile.imwrite(plain, frames, photometric="minisblack")
     tifffile.imwrite(packed, frames, photometric="minisblack", compression="zlib")
-    assert isinstance(FrameSource(plain)._open(), np.memmap)
-    assert isinstance(FrameSource(packed)._open(), PagedSeries)
-    np.testing.assert_array_equal(FrameSource(packed)[7], frames[7])
+    assert isinstance(StoredFrames(plain)._open(), np.memmap)
+    assert isinstance(StoredFrames(packed)._open(), PagedSeries)
+    np.testing.assert_array_equal(StoredFrames(packed)[7], frames[7])
     peaks = {}
     for n in (2, 12):
         tracemalloc.start()
@@ -221,3 +221,31 @@ def test_a_store_is_resumed_on_the_other_device(data, recipe, rec, tmp_path):
     assert (report.skipped, report.written) == (1, 2) and list(done_frames(out)) == [0, 1, 2]
     ri = read_ome_zarr(out, "ri")[0]
     np.testing.assert_allclose(ri[2], rec.reconstruct(frames[2]).ri, atol=1e-5)
+
+
+def test_raw_frames_in_an_ome_zarr_image_stream_like_a_tiff(data, recipe, rec, tmp_path):
+    """A camera that records to OME-Zarr: the (t, y, x) image is read one chunk per frame, named by
+    its files' content for the resume stamp, and reconstructs to the TIFF's numbers."""
+    import zarr
+
+    from napari_ssdpc.io.frame_source import StoredFrames
+
+    _, _, _, frames = data
+    raw = tmp_path / "raw.zarr"
+    image = zarr.open_group(str(raw / "frames"), mode="w", zarr_format=2)
+    axes = [{"name": "t", "type": "time"}, {"name": "y", "type": "space"}, {"name": "x", "type": "space"}]
+    image.attrs["multiscales"] = [{"version": "0.4", "axes": axes, "datasets": [{"path": "0"}]}]
+    image.create_array("0", shape=frames[:3].shape, chunks=(1, *frames.shape[1:]), dtype=frames.dtype)
+    image["0"][:] = frames[:3]
+    source = StoredFrames(raw / "frames")
+    assert len(source) == 3 and source.frame_shape == frames.shape[1:]
+    np.testing.assert_array_equal(source[2], frames[2])
+    first = source.identity()
+    image["0"][1] = frames[1] + 1
+    assert StoredFrames(raw / "frames").identity()["sha256"] != first["sha256"]  # another recording
+    image["0"][1] = frames[1]
+    report = Pipeline(recipe, reconstructor=rec).run(source, ZarrSink(tmp_path / "out.zarr"), progress=False)
+    assert report.written == 3
+    np.testing.assert_array_equal(read_ome_zarr(tmp_path / "out.zarr", "ri")[0][0], rec.reconstruct(frames[0]).ri)
+    with pytest.raises(SsdpcError, match="not a readable OME-Zarr"):
+        StoredFrames(tmp_path)

@@ -15,7 +15,7 @@ import pytest
 import zarr.storage._local as zlocal
 
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.io.frame_source import FrameSource
+from napari_ssdpc.io.frame_source import StoredFrames
 from napari_ssdpc.io.frames import read_ome_zarr
 from napari_ssdpc.io.store import StoreLock, done_frames, read_complete
 from napari_ssdpc.pipeline.job import Job
@@ -94,12 +94,12 @@ def test_a_changed_file_is_refused_and_a_touched_one_resumes(setup, tmp_path):
     recipe, frames = setup
     src, out = tmp_path / "in.tif", tmp_path / "s.zarr"
     tifffile.imwrite(src, frames, photometric="minisblack")
-    run(recipe, FrameSource(src), out, stop_after=1)
+    run(recipe, StoredFrames(src), out, stop_after=1)
     os.utime(src)  # touched, same content
-    run(recipe, FrameSource(src), out, stop_after=1)
+    run(recipe, StoredFrames(src), out, stop_after=1)
     tifffile.imwrite(src, frames[::-1], photometric="minisblack")
     with pytest.raises(SsdpcError, match=f"another recording.*{src.name}.*bytes, modified"):
-        run(recipe, FrameSource(src), out)
+        run(recipe, StoredFrames(src), out)
     assert list(done_frames(out)) == [0, 1]
 
 

@@ -23,7 +23,7 @@ from scipy import ndimage
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.widgets.common import MIN_DOCK_HEIGHT_PX
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.io.frames import atomic_write
+from napari_ssdpc.files import atomic_write
 
 
 # ============================================================================ sampling

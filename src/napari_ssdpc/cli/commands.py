@@ -218,7 +218,7 @@ def cmd_reconstruct(args):
         The parsed options of `ssdpc reconstruct` (see ``ssdpc reconstruct --help``).
     """
     from napari_ssdpc.calibration.result import Calibration
-    from napari_ssdpc.io.frame_source import FrameSource
+    from napari_ssdpc.io.frame_source import StoredFrames
     from napari_ssdpc.io.frames import read_frame
     from napari_ssdpc.pipeline.job import Job
     from napari_ssdpc.pipeline.run import Pipeline
@@ -252,7 +252,7 @@ def cmd_reconstruct(args):
     cal = Calibration.from_json(args.calibration)
     optics = _optics(args.optics) if args.optics is not None else (cal.optics if args.config is None else None)
     cfg = run_config(args, optics)
-    source = FrameSource(args.raw if is_zarr else read_frame(args.raw))  # a series streams, frame by frame
+    source = StoredFrames(args.raw if is_zarr else read_frame(args.raw))  # a series streams, frame by frame
     flat = read_frame(args.flat, allow_series=False, name="flat frame") if args.flat else None
     meta = {
         "software": SOFTWARE,

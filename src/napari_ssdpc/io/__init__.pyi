@@ -1,9 +1,9 @@
-from .frame_source import FrameSource
+from .frame_source import StoredFrames
 from .frames import create_ome_zarr, read_frame, read_ome_zarr, write_ome_tiff, write_ome_tiffs
 from .store import done_frames, open_store, read_complete, write_frame
 
 __all__ = [
-    "FrameSource",
+    "StoredFrames",
     "create_ome_zarr",
     "done_frames",
     "open_store",

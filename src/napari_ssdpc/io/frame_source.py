@@ -1,5 +1,6 @@
 """Raw frames of a series, read one at a time: a memory map of an uncompressed TIFF, else one
-page at a time, or an in-memory array; truncated and foreign files are refused up front."""
+page at a time, a (t, y, x) OME-Zarr image (a camera's recording) one chunk at a time, or an
+in-memory array; truncated and foreign files are refused up front."""
 
 from __future__ import annotations
 
@@ -11,12 +12,13 @@ import numpy as np
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.files import os_error
 
-__all__ = ["FrameSource", "PagedSeries"]
+__all__ = ["StoredFrames", "PagedSeries"]
 
 
-class FrameSource:
-    """Raw frames (t, y, x) of a TIFF series, read one at a time; or an in-memory or lazy (dask) array
-    (a dask array is named by its graph: frames simulated or read on demand are not read to hash them).
+class StoredFrames:
+    """Raw frames (t, y, x) of a TIFF series or an OME-Zarr image, read one at a time; or an
+    in-memory or lazy (dask) array (a dask array is named by its graph: frames simulated or read
+    on demand are not read to hash them).
 
     Pickles as its path (Dask workers reopen the file themselves)."""
 
@@ -69,17 +71,22 @@ class FrameSource:
                 "frames": len(self),
                 "sha256": h.hexdigest(),
             }
+        files = sorted(p for p in self.path.rglob("*") if p.is_file()) if self.path.is_dir() else [self.path]
         try:
-            st = self.path.stat()
-            with open(self.path, "rb") as f:
-                for block in iter(lambda: f.read(1 << 22), b""):
-                    h.update(block)
+            size = mtime = 0
+            for path in files:  # a store's files in a fixed order, names and contents
+                st = path.stat()
+                size, mtime = size + st.st_size, max(mtime, st.st_mtime_ns)
+                h.update(str(path.relative_to(self.path) if path != self.path else "").encode())
+                with open(path, "rb") as f:
+                    for block in iter(lambda: f.read(1 << 22), b""):  # noqa: B023
+                        h.update(block)
         except OSError as e:
             raise os_error(e, self.path, "reading") from None
         return {
             "path": self.name,
-            "size": int(st.st_size),
-            "mtime_ns": int(st.st_mtime_ns),
+            "size": int(size),
+            "mtime_ns": int(mtime),
             "frames": len(self),
             "sha256": h.hexdigest(),
         }
@@ -88,7 +95,7 @@ class FrameSource:
         if self._array is not None:
             return self._array
         if self._data is None:
-            self._data = _open_tiff(self.path)
+            self._data = _open_zarr(self.path) if self.path.is_dir() else _open_tiff(self.path)
         return self._data
 
     def __len__(self) -> int:
@@ -120,13 +127,47 @@ class FrameSource:
         if not 0 <= int(t) < self.shape[0]:
             raise IndexError(f"frame {t} of {self.shape[0]}")
         a = self._open()
-        frame = a[int(t)] if a.ndim == 3 else (a[0] if isinstance(a, PagedSeries) else a)
+        frame = a[int(t)] if a.ndim == 3 else (a[0] if isinstance(a, (PagedSeries, _Squeezed)) else a)
         return np.array(frame, copy=True)  # detach from the memory map
 
     def __getstate__(self):
         state = dict(self.__dict__)
         state["_data"] = None
         return state
+
+
+def _open_zarr(path: Path):
+    """The raw frames of an OME-Zarr image (its first resolution level) or of a plain zarr array,
+    without the axes of length 1: (t, y, x) or (y, x)."""
+    import zarr
+
+    try:
+        node = zarr.open(str(path), mode="r")
+        if not hasattr(node, "shape"):  # a group: an OME-Zarr image names its levels
+            level = node.attrs.get("multiscales", [{}])[0].get("datasets", [{"path": "0"}])[0]["path"]
+            node = node[level]
+    except Exception as e:  # zarr raises many types for folders that hold no store
+        raise SsdpcError(
+            f"{path}: not a readable OME-Zarr image of raw frames ({type(e).__name__}); give a TIFF or an OME-Zarr"
+        ) from None
+    keep = tuple(0 if n == 1 else slice(None) for n in node.shape[:-2])
+    if sum(1 for k in keep if k != 0) > 1:
+        raise SsdpcError(f"{path}: expected (t, y, x) raw frames, got shape {node.shape}")
+    return _Squeezed(node, keep)
+
+
+class _Squeezed:
+    """A zarr array with its length-1 leading axes taken away, read frame by frame."""
+
+    def __init__(self, array, keep):
+        self._a, self._keep = array, keep
+        lead = [n for n, k in zip(array.shape, keep) if k != 0]
+        self.shape = (*lead, *array.shape[-2:])
+        self.ndim, self.dtype = len(self.shape), array.dtype
+
+    def __getitem__(self, t):
+        index = [t if k != 0 else 0 for k in self._keep] if self.ndim == 3 else list(self._keep)
+        return np.asarray(self._a[tuple(index)])
 
 
 def _open_tiff(path: Path):

@@ -15,11 +15,10 @@ import tifffile
 
 from napari_ssdpc._version import SOFTWARE
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.files import atomic_write, atomic_write_set
+from napari_ssdpc.files import atomic_write_set
 
 __all__ = [
     "TiffInfo",
-    "atomic_write",
     "create_ome_zarr",
     "link_root_image",
     "ngff_multiscales",

@@ -1,7 +1,7 @@
 from .job import Job
 from .run import Pipeline, RunReport, process_frame
 from .sinks import MemorySink, OmeTiffSink, OutputGrid, Sink, ZarrSink
-from .sources import FrameSource, LiveFrames, StoredFrames, as_source
+from .sources import FrameSource, LiveFrames, as_source
 
 __all__ = [
     "FrameSource",
@@ -13,7 +13,6 @@ __all__ = [
     "Pipeline",
     "RunReport",
     "Sink",
-    "StoredFrames",
     "ZarrSink",
     "as_source",
     "process_frame",

@@ -93,7 +93,7 @@ class Sink(Protocol):
         job : Job
             What the frames are reconstructed with (its ``result_key`` stamps a store).
         grid : OutputGrid
-        source : FrameSource
+        source : StoredFrames
 
         Returns
         -------
@@ -139,7 +139,7 @@ class MemorySink:
         job : Job
             What the frames are reconstructed with (its ``result_key`` stamps a store).
         grid : OutputGrid
-        source : FrameSource
+        source : StoredFrames
 
         Returns
         -------
@@ -197,7 +197,7 @@ class OmeTiffSink:
         job : Job
             What the frames are reconstructed with (its ``result_key`` stamps a store).
         grid : OutputGrid
-        source : FrameSource
+        source : StoredFrames
 
         Returns
         -------
@@ -266,7 +266,7 @@ class ZarrSink:
         job : Job
             What the frames are reconstructed with (its ``result_key`` stamps a store).
         grid : OutputGrid
-        source : FrameSource
+        source : StoredFrames
 
         Returns
         -------

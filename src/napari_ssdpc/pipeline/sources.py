@@ -4,7 +4,7 @@ A source gives frames by index, says how many can be read now (:meth:`FrameSourc
 and whether more will come (:meth:`FrameSource.finished`), and names what it holds
 (:meth:`FrameSource.identity`, the resume stamp of a series store). Files and arrays are
 finished from the start (:class:`StoredFrames`: a TIFF path, a NumPy or a dask array, read one
-frame at a time by :class:`~napari_ssdpc.io.frame_source.FrameSource`); :class:`LiveFrames`
+frame at a time by :class:`~napari_ssdpc.io.frame_source.StoredFrames`); :class:`LiveFrames`
 takes frames as they arrive (a camera callback, a writer) until it is closed.
 """
 
@@ -16,9 +16,9 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.io.frame_source import FrameSource as StoredFrames
+from napari_ssdpc.io.frame_source import StoredFrames
 
-__all__ = ["FrameSource", "LiveFrames", "StoredFrames", "as_source"]
+__all__ = ["FrameSource", "LiveFrames", "as_source"]
 
 
 @runtime_checkable

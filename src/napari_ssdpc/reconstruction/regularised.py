@@ -47,7 +47,7 @@ from napari_ssdpc.reconstruction.forward import ViewModel, apply
 from napari_ssdpc.reconstruction.tv_report import TvReport
 from napari_ssdpc.settings.reconstruction import SIGNS
 
-__all__ = ["LAMBDA_PER_NOISE", "TvInversion", "TvReport"]
+__all__ = ["LAMBDA_PER_NOISE", "TvInversion"]
 
 #: ℓ of the sparsity term μ‖φ‖₁ with μ = λ/ℓ, in units of the axial resolution R_z: without it a
 #: constant offset inside the field stop (the unmeasured slice mean) costs only its boundary.

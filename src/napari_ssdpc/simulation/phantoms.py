@@ -30,16 +30,12 @@ import numpy as np
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.settings.optics import Optics
-from napari_ssdpc.simulation.phantom_base import Composite, Phantom
+from napari_ssdpc.simulation.phantom_base import Phantom
 from napari_ssdpc.simulation.primitives import Box, Ellipsoid
 
 __all__ = [
     "BarTarget",
-    "Box",
     "Cell",
-    "Composite",
-    "Ellipsoid",
-    "Phantom",
     "Sphere",
     "Spheres",
     "bar_target",

@@ -30,7 +30,8 @@ from napari_ssdpc.simulation.camera import Camera
 from napari_ssdpc.simulation.imaging import Imager, array_as_built, render
 from napari_ssdpc.simulation.imperfect import ArrayErrors
 from napari_ssdpc.simulation.multislice import DZ_UM, Sampling, Slabs, Source
-from napari_ssdpc.simulation.phantoms import Phantom, optics_for
+from napari_ssdpc.simulation.phantom_base import Phantom
+from napari_ssdpc.simulation.phantoms import optics_for
 
 __all__ = ["Simulation", "effective_tan_theta", "simulate"]
 

@@ -117,7 +117,7 @@ class CalibrateWidget(StepWidget):
             return None
 
         def work(progress, should_stop):
-            from napari_ssdpc.calibration.calibrate import calibrate
+            from napari_ssdpc.calibration import calibrate
 
             progress(0, 1, "calibrating" if guess is None else f"calibrating from {len(guess)} guide points")
             frame = np.asarray(data if t is None else data[t])

@@ -1,0 +1,101 @@
+"""The frame loop: any source (a file, an array, frames still arriving) into any sink, each frame
+once, in order, with the previous frame's solution as a warm start where asked."""
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from napari_ssdpc.errors import Cancelled, SsdpcError
+from napari_ssdpc.pipeline.job import Job
+from napari_ssdpc.pipeline.run import Pipeline
+from napari_ssdpc.pipeline.sinks import MemorySink, OmeTiffSink, ZarrSink
+from napari_ssdpc.pipeline.sources import FrameSource, LiveFrames, as_source
+from napari_ssdpc.reconstruction.methods.base import Solution
+from napari_ssdpc.reconstruction.reconstructor import Result
+from napari_ssdpc.settings.config import RunConfig
+
+
+class CountingRec:
+    """A Reconstructor's contract in small: (2, 4, 4) volumes of the frame's mean; it records the
+    frames it saw and the warm starts it was given."""
+
+    z_um = np.array([0.0, 1.0])
+    y_um = x_um = np.arange(4) * 0.5
+    build_seconds = 0.0
+
+    def __init__(self):
+        self.seen, self.warm = [], []
+
+    def settings(self):
+        return {"dz_um": 1.0}
+
+    def reconstruct(self, frame, *, warm=None, progress=None, should_stop=None, name="frame"):
+        self.seen.append(float(np.mean(frame)))
+        self.warm.append(None if warm is None else float(warm.phase.mean()))
+        v = np.full((2, 4, 4), float(np.mean(frame)) * 1e-3, np.float32)
+        grid = dict(z_um=self.z_um, y_um=self.y_um, x_um=self.x_um, settings=self.settings())
+        return Result(v + 1.5, v, v, None, {}, {}, solution=Solution(v), **grid)
+
+
+@pytest.fixture(scope="module")
+def job(synthetic_series):
+    optics, cal, _, _, _ = synthetic_series
+    return Job(RunConfig.of(optics), cal)
+
+
+def test_live_frames_are_followed_as_they_arrive_until_the_source_closes(job):
+    shape = tuple(job.calibration.frame_shape)
+    live, rec, sink = LiveFrames(shape), CountingRec(), MemorySink()
+    assert isinstance(live, FrameSource) and as_source(live) is live
+    arrivals = []
+
+    def camera():
+        for k in range(4):
+            time.sleep(0.05)
+            live.push(np.full(shape, k + 1, np.uint16))
+        live.close()
+
+    writer = threading.Thread(target=camera)
+    writer.start()
+    report = Pipeline(job, reconstructor=rec).run(
+        live, sink, progress=False, on_frame=lambda t, done, total, res: arrivals.append((t, done, total))
+    )
+    writer.join()
+    assert report.written == 4 and rec.seen == [1.0, 2.0, 3.0, 4.0]  # every frame once, in order
+    assert arrivals == [(0, 1, None), (1, 2, None), (2, 3, None), (3, 4, None)]  # the length is not known
+    assert sorted(sink.frames) == [0, 1, 2, 3] and sink.last.delta_n.mean() == pytest.approx(4e-3)
+    with pytest.raises(SsdpcError, match="closed"):
+        live.push(np.zeros(shape, np.uint16))
+    with pytest.raises(SsdpcError, match="a frame of shape"):
+        LiveFrames(shape).push(np.zeros((4, 4)))
+
+
+def test_a_stop_ends_the_wait_for_the_next_live_frame(job):
+    live, stop = LiveFrames(tuple(job.calibration.frame_shape)), threading.Event()
+    threading.Timer(0.3, stop.set).start()
+    t0 = time.perf_counter()
+    with pytest.raises(Cancelled):
+        Pipeline(job, reconstructor=CountingRec()).run(live, MemorySink(), progress=False, should_stop=stop.is_set)
+    assert time.perf_counter() - t0 < 2.0
+
+
+def test_warm_starts_hand_each_frame_the_previous_solution(job):
+    frames = np.stack([np.full(job.calibration.frame_shape, k, np.uint16) for k in (10, 20, 30)])
+    cold, warm = CountingRec(), CountingRec()
+    Pipeline(job, reconstructor=cold).run(frames, MemorySink(), progress=False)
+    Pipeline(job, reconstructor=warm).run(frames, MemorySink(), progress=False, warm_start=True)
+    assert cold.warm == [None, None, None]
+    assert warm.warm == [None, pytest.approx(0.01), pytest.approx(0.02)]
+
+
+def test_sinks_refuse_sources_they_cannot_hold(job, tmp_path):
+    shape = tuple(job.calibration.frame_shape)
+    frames = np.zeros((2, *shape), np.uint16)
+    with pytest.raises(SsdpcError, match="holds several frames; write a time series to OME-Zarr"):
+        Pipeline(job, reconstructor=CountingRec()).run(frames, OmeTiffSink({"ri": tmp_path / "o.ome.tif"}))
+    live = LiveFrames(shape)
+    with pytest.raises(SsdpcError, match="a store needs the series' length"):
+        Pipeline(job, reconstructor=CountingRec()).run(live, ZarrSink(tmp_path / "s.zarr"))
+    assert not (tmp_path / "o.ome.tif").exists() and not (tmp_path / "s.zarr").exists()
