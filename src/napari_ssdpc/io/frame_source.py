@@ -79,7 +79,7 @@ class StoredFrames:
                 size, mtime = size + st.st_size, max(mtime, st.st_mtime_ns)
                 h.update(str(path.relative_to(self.path) if path != self.path else "").encode())
                 with open(path, "rb") as f:
-                    for block in iter(lambda: f.read(1 << 22), b""):  # noqa: B023
+                    for block in iter(lambda: f.read(1 << 22), b""):
                         h.update(block)
         except OSError as e:
             raise os_error(e, self.path, "reading") from None
