@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from napari_ssdpc.calibration.calibrate import calibrate
+from napari_ssdpc.calibration import calibrate
 from napari_ssdpc.calibration.overlay import overlay_png
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.settings.optics import Optics

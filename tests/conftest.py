@@ -19,7 +19,7 @@ def synthetic_series(tmp_path_factory):
     frames of the flat frame with smooth random modulations, for the series and bench tests."""
     from scipy import ndimage
 
-    from napari_ssdpc.calibration.calibrate import calibrate
+    from napari_ssdpc.calibration import calibrate
     from napari_ssdpc.physics.lattice import Grid
     from napari_ssdpc.settings.optics import Optics
     from napari_ssdpc.simulation.sample_free import flat_frame, white_frame

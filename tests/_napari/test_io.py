@@ -11,7 +11,7 @@ import tifffile
 from napari_ssdpc._napari import reader as _reader
 from napari_ssdpc._napari import sample_data as _sample_data
 from napari_ssdpc._napari import writer as _writer
-from napari_ssdpc.calibration.calibrate import calibrate
+from napari_ssdpc.calibration import calibrate
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.frames import write_ome_tiff
 from napari_ssdpc.settings.optics import Optics

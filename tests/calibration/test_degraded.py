@@ -16,7 +16,7 @@ import warnings
 import numpy as np
 import pytest
 
-from napari_ssdpc.calibration.calibrate import calibrate
+from napari_ssdpc.calibration import calibrate
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.settings.optics import Optics

@@ -3,5 +3,8 @@
 Nothing here runs when a frame is reconstructed.
 """
 
-# Submodules, imported where they are used (matplotlib and the simulator load only then).
-__all__ = ["bench", "bench_report", "cases", "demo", "figures", "metrics", "reference"]
+import lazy_loader as _lazy
+
+# Submodules (listed in __init__.pyi), each loaded on first use: matplotlib and the simulator load
+# only then.
+__getattr__, __dir__, __all__ = _lazy.attach_stub(__name__, __file__)

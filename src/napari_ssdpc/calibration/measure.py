@@ -16,7 +16,7 @@ everything else is measured on the frame:
    lenslet inside the pupil, the halves of paper Eq. 5 and the brightness.
 
 A user's rough EI positions (``guess``, e.g. from the napari Points layer) replace the
-ring filter when detection fails; see ``manual.py``. Coordinates: x = column, y = row,
+ring filter when detection fails. Coordinates: x = column, y = row,
 pixel centres at integers.
 """
 
@@ -30,26 +30,15 @@ import numpy as np
 from napari_ssdpc.calibration.axis import FULL_PUPIL, all_cells, decide_kind, ei_brightness, fit_axis, pupil_lenslets
 from napari_ssdpc.calibration.disks import Candidates, Circle, find_disks, noise_sigma, rim_circle
 from napari_ssdpc.calibration.lattice_fit import MIN_AFFINE, AffineLattice, assign
-from napari_ssdpc.calibration.overlay import overlay_png
 from napari_ssdpc.calibration.refine import OUTLIER, SMALL_EI_PX, all_rims, fit_lattice, outshone, refine_centres
-from napari_ssdpc.calibration.result import CALIBRATION_FORMAT, CALIBRATION_VERSION, Calibration, Views, validated
-from napari_ssdpc.calibration.views import extract_views, insert_views
+from napari_ssdpc.calibration.result import Calibration, validated
+from napari_ssdpc.calibration.saturation import FULL_SCALE_CODES
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.physics.lattice import Grid, xy_pair
 from napari_ssdpc.settings.lenslets import Lenslet, circle_overlap_fraction, lattice_cell
 from napari_ssdpc.settings.optics import Optics
 
-__all__ = [
-    "CALIBRATION_FORMAT",
-    "CALIBRATION_VERSION",
-    "KINDS",
-    "Calibration",
-    "Views",
-    "calibrate",
-    "extract_views",
-    "insert_views",
-    "overlay_png",
-]
+__all__ = ["KINDS", "calibrate"]
 
 KINDS = ("auto", "white", "flat", "sample")
 
@@ -74,8 +63,7 @@ def _check_signal(raw, img):
             f"frame is blank (every pixel is {hi:g}); "
             "record a white frame with the lamp on and the condenser fully open"
         )
-    codes = {2.0**n - 1 for n in range(8, 17)}
-    if np.asarray(raw).dtype.kind in "ui" or hi in codes:
+    if np.asarray(raw).dtype.kind in "ui" or hi in FULL_SCALE_CODES:
         bright = img > lo + 0.5 * (hi - lo)
         n_top = int(np.count_nonzero(img >= hi))
         if n_top > 50 and n_top > 5e-3 * np.count_nonzero(bright):

@@ -1,0 +1,19 @@
+from . import (
+    bench,
+    bench_report,
+    cases,
+    demo,
+    figures,
+    metrics,
+    reference,
+)
+
+__all__ = [
+    "bench",
+    "bench_report",
+    "cases",
+    "demo",
+    "figures",
+    "metrics",
+    "reference",
+]
