@@ -15,28 +15,34 @@ OUT = Path(__file__).parent / "images" / "architecture.png"
 
 # (name, what it holds, row, column span) from the bottom layer up
 LAYERS = [
-    ("settings/", "Optics, ReconstructionSettings, RunConfig\n(pydantic, YAML/JSON)", 0, (0, 3)),
-    ("physics/", "design calculator, lattice geometry,\npupils, PSF (Eq. 6), WOTFs (Eqs. 2-4)", 1, (0, 3)),
+    ("settings/", "Optics, ReconstructionSettings (one section per\nmethod), OutputSettings, RunConfig", 0, (0, 3)),
+    (
+        "physics/",
+        "design, lattice, pupils, waves (propagation, source,\nsub-apertures), PSF (Eq. 6), WOTFs (Eqs. 2-4)",
+        1,
+        (0, 3),
+    ),
     ("calibration/", "EI disks, lattice, optical axis,\ncalibrate(), extract_views()", 2, (0, 1.45)),
     (
         "reconstruction/",
-        "backend, RL, DPC (Eqs. 1, 7), WOTF and\nregularised inversions, pipeline, outputs",
+        "Reconstructor: checks, views once, stacks;\nmethods/ registry: tv | wotf | rl",
         2,
         (1.55, 3),
     ),
-    ("simulation/", "phantoms, source, multislice,\nlenslet imaging, camera", 2.9, (0, 1.45)),
-    ("io/", "frames, OME-TIFF, OME-Zarr,\nresumable series store", 2.9, (1.55, 3)),
+    ("simulation/", "phantoms, multislice,\nlenslet imaging, camera", 2.9, (0, 0.95)),
+    ("io/", "StoredFrames, OME-TIFF,\nOME-Zarr store", 2.9, (1.025, 1.975)),
+    ("pipeline/", "Job, sources, sinks,\nPipeline (frame loop), Dask", 2.9, (2.05, 3)),
     ("cli/", "ssdpc design | calibrate |\nsimulate | reconstruct | bench | demo", 3.8, (0, 0.95)),
-    ("_napari/", "readers, writer, sample data,\nshared model, jobs, widgets", 3.8, (1.025, 1.975)),
+    ("_napari/", "readers, writer, sample data,\nsession (one Job), widgets", 3.8, (1.025, 1.975)),
     ("validation/", "metrics, cases, figures,\ndemo, reference path, bench", 3.8, (2.05, 3)),
 ]
 STEPS = [
-    ("raw TIFF", "io.frames.read_frame"),
-    ("views (K, h, w)", "calibration: check_frame, extract_views"),
-    ("flat-fielded contrast", "reconstruction.pipeline.preprocess"),
-    ("phase per slab (Z, y, x)", "reconstruction: wotf / regularised"),
-    ("Δn, RI volume", "reconstruction.dpc.phase_to_delta_n"),
-    ("OME-TIFF / OME-Zarr", "reconstruction.outputs + io"),
+    ("RunConfig + calibration + flat", "pipeline.job.Job: Reconstructor built once"),
+    ("frame source", "pipeline.sources (StoredFrames, LiveFrames)"),
+    ("checked views (K, h, w), once", "reconstruction.contrast.ViewContrast"),
+    ("phase per slab (Z, y, x)", "reconstruction.methods: tv | wotf | rl"),
+    ("Δn, RI volume, checked", "reconstructor.Result, checks.check_result"),
+    ("sink", "pipeline.sinks: memory | OME-TIFF | OME-Zarr"),
 ]
 
 
@@ -56,7 +62,7 @@ def main() -> None:
     )
     bx.set_xlim(0, 1)
     bx.set_ylim(-0.5, len(STEPS))
-    bx.set_title("One frame, raw TIFF to RI volume", fontsize=12)
+    bx.set_title("The frame loop (pipeline.run.Pipeline)", fontsize=12)
     for i, (what, where) in enumerate(STEPS):
         y = len(STEPS) - 1 - i
         bx.add_patch(FancyBboxPatch((0.1, y), 0.8, 0.6, boxstyle="round,pad=0.02", fc="#fdf3e1", ec="#c17d11"))

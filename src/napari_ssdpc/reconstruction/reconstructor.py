@@ -28,7 +28,7 @@ from napari_ssdpc.reconstruction.backend import get_backend
 from napari_ssdpc.reconstruction.contrast import ViewContrast
 from napari_ssdpc.reconstruction.dpc import phase_to_delta_n, refractive_index
 from napari_ssdpc.reconstruction.methods import method_class
-from napari_ssdpc.reconstruction.methods.base import Setup, Solution
+from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
 from napari_ssdpc.reconstruction.stacks import DirectionalStacks
 from napari_ssdpc.settings.config import RunConfig
 from napari_ssdpc.settings.outputs import QUANTITIES, layout
@@ -146,6 +146,9 @@ class Reconstructor:
         Refuse settings whose operators do not fit in the free memory.
     backend : Backend, optional
         An array backend instead of the one ``reconstruction.device`` names.
+    method : type of PhaseMethod, optional
+        A phase method to use instead of the registered one ``reconstruction.method`` names (to
+        try a method before it is registered; docs/architecture.md).
     """
 
     def __init__(
@@ -160,6 +163,7 @@ class Reconstructor:
         min_light: float = 0.05,
         check_memory: bool = True,
         backend=None,
+        method: type[PhaseMethod] | None = None,
     ):
         if not isinstance(config, RunConfig):
             raise SsdpcError(
@@ -177,7 +181,7 @@ class Reconstructor:
         self.config, self.calibration = config, calibration
         self.optics = optics = config.optics
         settings = config.reconstruction
-        method = method_class(settings.method)
+        method = method_class(settings.method) if method is None else method
         with_stacks = bool(stacks) or config.outputs.needs_stacks or method.uses_stacks
         checks.check_optics_match(optics, calibration, "optics")
         if check_memory:
@@ -331,6 +335,7 @@ class Reconstructor:
         settings (every section), the z grid as built, the method's own numbers, the lit lenslets."""
         return {
             **self.config.reconstruction.to_dict(),
+            "method": self.method.name,
             "z_min_um": float(self.z_um[0]),
             "z_max_um": float(self.z_um[-1]),
             "dz_um": self.dz,

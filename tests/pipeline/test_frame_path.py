@@ -1,0 +1,27 @@
+"""The path of one frame through `ssdpc reconstruct`: each input is checked and cut into views once."""
+
+import numpy as np
+import tifffile
+
+from napari_ssdpc.cli.main import main
+from napari_ssdpc.reconstruction import contrast
+
+
+def test_ssdpc_reconstruct_cuts_the_flat_and_the_frame_into_views_once(synthetic_series, tmp_path, monkeypatch):
+    optics, cal, flat, frames, _ = synthetic_series
+    tifffile.imwrite(tmp_path / "frame.tif", frames[0])
+    tifffile.imwrite(tmp_path / "flat.tif", flat)
+    cal.to_json(tmp_path / "cal.json")
+    cut = []
+    real = contrast.extract_views
+
+    def counting(frame, calibration):
+        cut.append(float(np.max(frame)))
+        return real(frame, calibration)
+
+    monkeypatch.setattr(contrast, "extract_views", counting)
+    args = ["reconstruct", str(tmp_path / "frame.tif"), "--calibration", str(tmp_path / "cal.json")]
+    args += ["--flat", str(tmp_path / "flat.tif"), "--z", "-20", "20", "--dz", "10", "--method", "wotf"]
+    assert main([*args, "-o", str(tmp_path / "out.ome.tif")]) == 0
+    # the view grid (an empty frame), the flat, the frame: nothing is cut twice
+    assert len(cut) == 3 and cut[0] == 0.0 and all(c > 0 for c in cut[1:])
