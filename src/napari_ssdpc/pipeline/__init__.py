@@ -1,7 +1,7 @@
 """The frame loop: a job (configuration, calibration, flat), a frame source, a sink.
 
 :class:`~.run.Pipeline` builds the job's Reconstructor once and streams the frames of any
-:class:`~.sources.StoredFrames` (a TIFF, an array, a dask array, or frames still arriving) into any
+:class:`~.sources.FrameSource` (a TIFF, an OME-Zarr image, an array, or frames still arriving) into any
 :class:`~.sinks.Sink` (memory, OME-TIFF, a resumable OME-Zarr store), serially or on a Dask
 cluster. The CLI, napari and the benchmark all run frames through it.
 """

@@ -40,7 +40,7 @@ def run_on_dask(pipeline, source, sink, *, progress: bool = True, stop_after=Non
     ----------
     pipeline : Pipeline
         With ``workers`` or ``scheduler``.
-    source : StoredFrames
+    source : FrameSource
         A file the workers can read (a shared file system).
     sink : ZarrSink
         A store the workers can write.

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
@@ -83,25 +83,34 @@ class OutputGrid:
         return layout(len(self.z_um), (len(self.y_um), len(self.x_um)), save)
 
 
-class Sink(Protocol):
-    """What the frame loop writes to."""
+class Sink:
+    """What the frame loop writes to: opened once, a result per frame, closed at the end.
+
+    Subclasses implement ``_open`` (default: nothing held), ``_write`` and ``_close`` (default:
+    nothing to release).
+    """
 
     def open(self, job, grid: OutputGrid, source) -> set[int]:
-        """Prepare for the source's frames; return the frames already held (resumed).
+        """Prepare for the source's frames; return the frames already held (a store being resumed).
+
         Parameters
         ----------
         job : Job
             What the frames are reconstructed with (its ``result_key`` stamps a store).
         grid : OutputGrid
-        source : StoredFrames
+            Where every frame's result lies.
+        source : FrameSource
+            The frames to come.
 
         Returns
         -------
         set of int
         """
+        return self._open(job, grid, source)
 
     def write(self, t: int, result) -> float:
-        """Keep frame ``t``'s Result; return the seconds it took.
+        """Keep frame ``t``'s result.
+
         Parameters
         ----------
         t : int
@@ -113,13 +122,24 @@ class Sink(Protocol):
         float
             Seconds spent writing.
         """
+        return self._write(int(t), result)
 
     def close(self) -> None:
         """Release what :meth:`open` took (also after an error)."""
+        self._close()
+
+    def _open(self, job, grid, source) -> set[int]:
+        return set()
+
+    def _write(self, t: int, result) -> float:
+        raise NotImplementedError
+
+    def _close(self) -> None:
+        pass
 
 
-class MemorySink:
-    """Results kept in memory, in frame order.
+class MemorySink(Sink):
+    """Results kept in memory, in frame order (``frames``: {t: kept value}).
 
     Parameters
     ----------
@@ -130,42 +150,10 @@ class MemorySink:
     def __init__(self, keep: Callable[[Any], Any] | None = None):
         self.keep = keep or (lambda r: r)
         self.frames: dict[int, Any] = {}
-        self.grid: OutputGrid | None = None
 
-    def open(self, job, grid, source) -> set[int]:
-        """Nothing held yet.
-        Parameters
-        ----------
-        job : Job
-            What the frames are reconstructed with (its ``result_key`` stamps a store).
-        grid : OutputGrid
-        source : StoredFrames
-
-        Returns
-        -------
-        set of int
-        """
-        self.grid = grid
-        return set()
-
-    def write(self, t, result) -> float:
-        """Keep what ``keep`` takes of the result.
-        Parameters
-        ----------
-        t : int
-            Frame index.
-        result : Result
-
-        Returns
-        -------
-        float
-            Seconds spent writing.
-        """
-        self.frames[int(t)] = self.keep(result)
+    def _write(self, t, result) -> float:
+        self.frames[t] = self.keep(result)
         return 0.0
-
-    def close(self) -> None:
-        """Nothing to release."""
 
     @property
     def last(self):
@@ -173,8 +161,9 @@ class MemorySink:
         return self.frames[max(self.frames)] if self.frames else None
 
 
-class OmeTiffSink:
-    """One frame's RI and the saved quantities as OME-TIFF files, written as one unit.
+class OmeTiffSink(Sink):
+    """One frame's RI and the saved quantities as OME-TIFF files, written as one unit (a source
+    of several frames is refused).
 
     Parameters
     ----------
@@ -190,36 +179,12 @@ class OmeTiffSink:
         self.written: list[Path] = []
         self.result = None  # the frame's Result, once written
 
-    def open(self, job, grid, source) -> set[int]:
-        """An OME-TIFF holds one frame: a source of several is refused.
-        Parameters
-        ----------
-        job : Job
-            What the frames are reconstructed with (its ``result_key`` stamps a store).
-        grid : OutputGrid
-        source : StoredFrames
-
-        Returns
-        -------
-        set of int
-        """
+    def _open(self, job, grid, source) -> set[int]:
         if source.available() != 1 or not source.finished():
             raise SsdpcError(f"{source.name} holds several frames; write a time series to OME-Zarr (-o OUT.zarr)")
         return set()
 
-    def write(self, t, result) -> float:
-        """Write the files (all or none).
-        Parameters
-        ----------
-        t : int
-            Frame index.
-        result : Result
-
-        Returns
-        -------
-        float
-            Seconds spent writing.
-        """
+    def _write(self, t, result) -> float:
         voxel = result.voxel_um
         meta = {**self.meta, "settings": result.settings, "z_um": result.z_um.tolist()}
         files = {
@@ -230,14 +195,12 @@ class OmeTiffSink:
         self.result = result
         return 0.0
 
-    def close(self) -> None:
-        """Nothing to release."""
 
-
-class ZarrSink:
+class ZarrSink(Sink):
     """A resumable (t, z, y, x) OME-Zarr store, one chunk per frame (see :mod:`napari_ssdpc.io.store`).
 
-    A rerun with the same input and job skips the frames marked done; one writer at a time.
+    A rerun with the same input and job skips the frames marked done; one writer at a time (a lock
+    beside the store); a frame is marked done only after all its chunks are written.
 
     Parameters
     ----------
@@ -259,19 +222,7 @@ class ZarrSink:
         if self.out.exists() and not self.out.is_dir():
             raise SsdpcError(f"{self.out} exists and is a file, not an OME-Zarr folder; choose a new output path")
 
-    def open(self, job, grid, source) -> set[int]:
-        """Take the lock, create or reopen the store; the frames already done.
-        Parameters
-        ----------
-        job : Job
-            What the frames are reconstructed with (its ``result_key`` stamps a store).
-        grid : OutputGrid
-        source : StoredFrames
-
-        Returns
-        -------
-        set of int
-        """
+    def _open(self, job, grid, source) -> set[int]:
         n = source.available()
         if not source.finished():
             raise SsdpcError(f"{source.name}: a store needs the series' length; follow live frames into memory")
@@ -288,23 +239,10 @@ class ZarrSink:
         done = open_store(self.out, n, layout, grid.voxel_um, stamp, attrs, grid.origin_um)
         return set(np.flatnonzero(done[:] == 1).tolist())
 
-    def write(self, t, result) -> float:
-        """Write the frame's chunks, then mark it done.
-        Parameters
-        ----------
-        t : int
-            Frame index.
-        result : Result
-
-        Returns
-        -------
-        float
-            Seconds spent writing.
-        """
+    def _write(self, t, result) -> float:
         return write_frame(self.out, t, result.images(self.save))
 
-    def close(self) -> None:
-        """Release the lock."""
+    def _close(self) -> None:
         if self._lock is not None:
             self._lock.__exit__(None, None, None)
             self._lock = None

@@ -3,7 +3,7 @@
 A source gives frames by index, says how many can be read now (:meth:`FrameSource.available`)
 and whether more will come (:meth:`FrameSource.finished`), and names what it holds
 (:meth:`FrameSource.identity`, the resume stamp of a series store). Files and arrays are
-finished from the start (:class:`StoredFrames`: a TIFF path, a NumPy or a dask array, read one
+finished from the start (a TIFF path, an OME-Zarr image, a NumPy or a dask array, read one
 frame at a time by :class:`~napari_ssdpc.io.frame_source.StoredFrames`); :class:`LiveFrames`
 takes frames as they arrive (a camera callback, a writer) until it is closed.
 """

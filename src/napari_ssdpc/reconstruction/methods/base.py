@@ -8,6 +8,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from napari_ssdpc.errors import Cancelled
 from napari_ssdpc.reconstruction.backend import Backend
 from napari_ssdpc.reconstruction.contrast import ViewContrast
 from napari_ssdpc.settings.optics import Optics
@@ -68,17 +69,18 @@ class Solution:
 
 
 class PhaseMethod(ABC):
-    """A phase method: built once, then ``solve`` per frame.
+    """A phase method: built once, then :meth:`solve` per frame.
 
     Subclasses set :attr:`name` (their key in :data:`~napari_ssdpc.reconstruction.methods.METHODS`)
-    and :attr:`uses_stacks` (whether they take their phase from the directional stacks).
+    and :attr:`uses_stacks` (whether they take their phase from the directional stacks), and
+    implement ``_build(cls, setup, progress)`` (a classmethod that returns the built method) and
+    ``_solve(self, views, stacks, warm, progress, should_stop)`` (a :class:`Solution`).
     """
 
     name: ClassVar[str]
     uses_stacks: ClassVar[bool] = False
 
     @classmethod
-    @abstractmethod
     def build(cls, setup: Setup, progress=None) -> PhaseMethod:
         """Build the method's operators.
 
@@ -92,8 +94,8 @@ class PhaseMethod(ABC):
         -------
         PhaseMethod
         """
+        return cls._build(setup, progress)
 
-    @abstractmethod
     def solve(self, views, stacks=None, *, warm: Solution | None = None, progress=None, should_stop=None) -> Solution:
         """The phase of one frame.
 
@@ -108,13 +110,27 @@ class PhaseMethod(ABC):
         progress : callable, optional
             ``progress(done, total, label)`` per iteration.
         should_stop : callable, optional
-            Checked every iteration; True stops with
-            :class:`~napari_ssdpc.errors.Cancelled`.
+            Checked every iteration; True stops with :class:`~napari_ssdpc.errors.Cancelled`.
 
         Returns
         -------
         Solution
+            Phase per slab (Z, ny, nx), float32 rad.
         """
+        if self.uses_stacks and stacks is None:
+            raise ValueError(f"the '{self.name}' method takes its phase from the directional stacks")
+        sol = self._solve(views, stacks, warm, progress, should_stop)
+        if should_stop is not None and should_stop():
+            raise Cancelled("reconstruction cancelled")
+        sol.phase = np.asarray(sol.phase, np.float32)
+        return sol
+
+    @classmethod
+    @abstractmethod
+    def _build(cls, setup: Setup, progress) -> PhaseMethod: ...
+
+    @abstractmethod
+    def _solve(self, views, stacks, warm: Solution | None, progress, should_stop) -> Solution: ...
 
     def settings(self) -> dict:
         """The settings this method solves with, for the output metadata."""

@@ -20,42 +20,10 @@ class RlMethod(PhaseMethod):
         self.setup = setup
 
     @classmethod
-    def build(cls, setup: Setup, progress=None) -> RlMethod:
-        """Nothing beyond the stacks' operators.
+    def _build(cls, setup, progress):
+        return cls(setup)  # nothing beyond the stacks' operators
 
-        Parameters
-        ----------
-        setup : Setup
-        progress : callable, optional
-            ``progress(done, total, label)`` while the operators are built.
-
-        Returns
-        -------
-        RlMethod
-        """
-        return cls(setup)
-
-    def solve(self, views, stacks=None, *, warm=None, progress=None, should_stop=None) -> Solution:
-        """Paper Eq. 7 on every slice of the DPC stacks.
-
-        Parameters
-        ----------
-        views : ndarray, float32, (K, ny, nx)
-            Flat-fielded views.
-        stacks : Stacks, optional
-            The frame's directional stacks (required).
-        warm : Solution, optional
-            Unused: the inverse is linear.
-        progress, should_stop : callable, optional
-            Per iteration.
-
-        Returns
-        -------
-        Solution
-            Phase per slab (Z, ny, nx), rad.
-        """
-        if stacks is None:
-            raise ValueError("the 'rl' method takes its phase from the directional stacks")
+    def _solve(self, views, stacks, warm, progress, should_stop):
         h = [stacks.h_dpc["ud"], stacks.h_dpc["lr"]]
         dpc = [stacks.dpc["ud"], stacks.dpc["lr"]]
         return Solution(tikhonov_phase(dpc, h, self.setup.settings.rl.alpha) * self.setup.views.mask)

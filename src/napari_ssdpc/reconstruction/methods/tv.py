@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import math
 
-from napari_ssdpc.errors import Cancelled
 from napari_ssdpc.physics.design import design
 from napari_ssdpc.reconstruction.forward import padded_planes
 from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
@@ -21,7 +20,8 @@ __all__ = ["TvMethod"]
 
 
 class TvMethod(PhaseMethod):
-    """ADMM with anisotropic TV, sparsity, the sign of Δn, |Δn| ≤ dn_max and the field stop."""
+    """ADMM with anisotropic TV, sparsity, the sign of Δn, |Δn| ≤ dn_max and the field stop; without
+    a warm start each frame starts from its Tikhonov solution."""
 
     name = "tv"
 
@@ -29,46 +29,16 @@ class TvMethod(PhaseMethod):
         self.setup, self.wotf, self.tv = setup, wotf, tv
 
     @classmethod
-    def build(cls, setup: Setup, progress=None) -> TvMethod:
-        """One model of the views on the z grid padded by about R_z on each side; the Tikhonov
-        inverse of its output planes gives the start.
-
-        Parameters
-        ----------
-        setup : Setup
-        progress : callable, optional
-            ``progress(done, total, label)`` while the operators are built.
-
-        Returns
-        -------
-        TvMethod
-        """
+    def _build(cls, setup, progress):
+        # one model of the views on the z grid padded by about R_z on each side; the Tikhonov
+        # inverse of its output planes gives the start
         r_z = float(design(setup.optics)["r_z_ffl_um"])
         zs, planes = padded_planes(setup.z_um, r_z)
         model = view_model(setup, zs, progress)
         wotf = WotfInversion(model.planes(planes), setup.settings.tv.alpha)
         return cls(setup, wotf, TvInversion(model, planes, r_z, mask=setup.views.mask))
 
-    def solve(self, views, stacks=None, *, warm=None, progress=None, should_stop=None) -> Solution:
-        """The TV phase.
-
-        Parameters
-        ----------
-        views : ndarray, float32, (K, ny, nx)
-            Flat-fielded views.
-        stacks : Stacks, optional
-            The frame's directional stacks (unused).
-        warm : Solution, optional
-            Its phase is the start; without one the solve starts from the frame's
-            Tikhonov solution.
-        progress, should_stop : callable, optional
-            Per iteration.
-
-        Returns
-        -------
-        Solution
-            Phase per slab (Z, ny, nx), rad.
-        """
+    def _solve(self, views, stacks, warm, progress, should_stop):
         v, t = self.setup.views, self.setup.settings.tv
         contrast = contrast_of(views, v.view_mask)
         start = warm.phase if warm is not None else self.wotf.phase(contrast) * v.mask
@@ -82,8 +52,6 @@ class TvMethod(PhaseMethod):
             progress=None if progress is None else (lambda i, n, *_: progress(i, n, "TV")),
             should_stop=should_stop,
         )
-        if should_stop is not None and should_stop():
-            raise Cancelled("reconstruction cancelled")
         history = {"tv": {"objective": report.objective, "relative_change": report.relative_change}}
         return Solution(phi, report.to_dict(), history, state=phi)
 

@@ -54,7 +54,8 @@ def contrast_of(views, view_mask) -> np.ndarray:
 
 
 class WotfMethod(PhaseMethod):
-    """Linear: φ̂(u) = Aᴴ(AAᴴ + αI)⁻¹ ĉ(u) per lateral frequency (:mod:`..wotf`)."""
+    """Linear: φ̂(u) = Aᴴ(AAᴴ + αI)⁻¹ ĉ(u) per lateral frequency (:mod:`..wotf`); a warm start
+    changes nothing."""
 
     name = "wotf"
 
@@ -62,41 +63,11 @@ class WotfMethod(PhaseMethod):
         self.setup, self.inversion = setup, inversion
 
     @classmethod
-    def build(cls, setup: Setup, progress=None) -> WotfMethod:
-        """Build the Tikhonov inverse on the output planes.
+    def _build(cls, setup, progress):
+        # the Tikhonov inverse on the output planes
+        return cls(setup, WotfInversion(view_model(setup, setup.z_um, progress), setup.settings.wotf.alpha))
 
-        Parameters
-        ----------
-        setup : Setup
-        progress : callable, optional
-            ``progress(done, total, label)`` while the operators are built.
-
-        Returns
-        -------
-        WotfMethod
-        """
-        model = view_model(setup, setup.z_um, progress)
-        return cls(setup, WotfInversion(model, setup.settings.wotf.alpha))
-
-    def solve(self, views, stacks=None, *, warm=None, progress=None, should_stop=None) -> Solution:
-        """The Tikhonov phase.
-
-        Parameters
-        ----------
-        views : ndarray, float32, (K, ny, nx)
-            Flat-fielded views.
-        stacks : Stacks, optional
-            The frame's directional stacks (unused).
-        warm : Solution, optional
-            Unused: the inverse is linear.
-        progress, should_stop : callable, optional
-            Per iteration.
-
-        Returns
-        -------
-        Solution
-            Phase per slab (Z, ny, nx), rad.
-        """
+    def _solve(self, views, stacks, warm, progress, should_stop):
         v = self.setup.views
         return Solution(self.inversion.phase(contrast_of(views, v.view_mask)) * v.mask)
 
