@@ -54,3 +54,17 @@ def test_the_method_table_lists_every_registered_method():
     for name, entry in METHODS.items():
         path = entry.module.replace("napari_ssdpc.", "").replace(".", "/") + ".py"
         assert f"| `{name}`" in text and path in text, f"docs/architecture.md: no row for the method {name}"
+
+
+def test_the_readme_run_configuration_reads(tmp_path):
+    """The README's run.yaml is complete as printed: it reads, and its values arrive."""
+    from napari_ssdpc.settings.config import RunConfig
+    from napari_ssdpc.settings.optics import Optics
+
+    block = re.search(r"```yaml\n(# run\.yaml.*?)```", (ROOT / "README.md").read_text(encoding="utf-8"), re.S)
+    assert block is not None, "README.md: no run.yaml example"
+    (tmp_path / "run.yaml").write_text(block.group(1), encoding="utf-8")
+    calibrated = Optics.paper().replace(condenser_na=0.3)
+    cfg = RunConfig.from_yaml(tmp_path / "run.yaml", default_optics=calibrated)
+    assert cfg.optics == calibrated and cfg.reconstruction.z_min_um == -60 and cfg.reconstruction.tv.iterations == 60
+    assert cfg.outputs.save == ("opd_nm", "dry_mass")

@@ -7,8 +7,8 @@ import pytest
 import scipy.fft as sfft
 
 from napari_ssdpc.physics import transfer
-from napari_ssdpc.reconstruction.forward import ViewModel
-from napari_ssdpc.reconstruction.regularised import TvInversion, padded_planes
+from napari_ssdpc.reconstruction.forward import ViewModel, padded_planes
+from napari_ssdpc.reconstruction.regularised import TvInversion
 from napari_ssdpc.settings.optics import Optics
 
 

@@ -19,9 +19,8 @@ from napari_ssdpc.physics.waves import propagate
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation.camera import Camera
 from napari_ssdpc.simulation.multislice import Sampling, Source, exit_field
+from napari_ssdpc.simulation.phantom_base import Composite
 from napari_ssdpc.simulation.phantoms import (
-    Box,
-    Composite,
     Sphere,
     Spheres,
     bar_target,
@@ -30,6 +29,7 @@ from napari_ssdpc.simulation.phantoms import (
     pmma_bead,
     two_beads,
 )
+from napari_ssdpc.simulation.primitives import Box
 from napari_ssdpc.simulation.sample_free import flat_frame, flat_intensity, white_frame, white_intensity
 from napari_ssdpc.simulation.simulate import effective_tan_theta, simulate
 

@@ -250,8 +250,7 @@ def cmd_reconstruct(args):
     if distributed and not is_zarr:
         raise SsdpcError("--workers/--scheduler spread the frames of a time series; write it to OME-Zarr (-o OUT.zarr)")
     cal = Calibration.from_json(args.calibration)
-    optics = _optics(args.optics) if args.optics is not None else (cal.optics if args.config is None else None)
-    cfg = run_config(args, optics)
+    cfg = run_config(args, None if args.optics is None else _optics(args.optics), fallback=cal.optics)
     source = StoredFrames(args.raw if is_zarr else read_frame(args.raw))  # a series streams, frame by frame
     flat = read_frame(args.flat, allow_series=False, name="flat frame") if args.flat else None
     meta = {

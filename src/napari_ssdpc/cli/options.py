@@ -94,7 +94,7 @@ def add_reconstruction_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--save", help=f"extra outputs, comma separated: {','.join(SAVE_CHOICES)}")
 
 
-def run_config(args: argparse.Namespace, optics: Optics | None) -> RunConfig:
+def run_config(args: argparse.Namespace, optics: Optics | None, fallback: Optics | None = None) -> RunConfig:
     """The run configuration: the --config file (or defaults), then the flags given on top.
 
     Parameters
@@ -102,13 +102,18 @@ def run_config(args: argparse.Namespace, optics: Optics | None) -> RunConfig:
     args : argparse.Namespace
         Parsed arguments with the options of :func:`add_reconstruction_options`.
     optics : Optics or None
-        Optics to use (from --optics or the calibration); None keeps the config's.
+        Optics given on the command line (--optics): they win over the config's.
+    fallback : Optics, optional
+        The optics where neither --optics nor the config name any (the calibration's).
 
     Returns
     -------
     RunConfig
     """
-    cfg = RunConfig.from_yaml(args.config) if getattr(args, "config", None) else RunConfig()
+    if getattr(args, "config", None):
+        cfg = RunConfig.from_yaml(args.config, default_optics=fallback)
+    else:
+        cfg = RunConfig(optics=fallback or Optics.paper())
     data = cfg.reconstruction.to_dict()
     method = getattr(args, "method", None) or data["method"]
     for flag, key in FLAGS.items():

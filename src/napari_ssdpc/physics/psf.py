@@ -47,6 +47,7 @@ from napari_ssdpc.physics.pupil import axial_frequency, mean_tilt, soft_disk, su
 from napari_ssdpc.physics.waves import transfer_function
 from napari_ssdpc.settings.lenslets import Lenslet
 from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.settings.reconstruction import DEFAULT_Z_UM
 
 
 def _boxed_pupil(optics: Optics, u_k, shape, du):
@@ -308,7 +309,7 @@ class LensletPSF:
         (truncation error below 0.1% relative L2 for the paper's optics)."""
         o = self.optics
         if z_max_um is None:
-            z_max_um = 80.0  # the default z range, ±80 µm
+            z_max_um = max(abs(z) for z in DEFAULT_Z_UM)  # the default z range
         cos3 = (1.0 - (o.na / o.medium_index) ** 2) ** 1.5
         blur = abs(z_max_um) * o.subaperture_na / (o.medium_index * cos3)
         airy = 0.61 * o.wavelength_um / o.subaperture_na

@@ -83,7 +83,7 @@ class DirectionalStacks:
         self.halves, self.mask, self.settings = halves, mask, settings
         shape = mask.shape
         self.psf = LensletPSF(optics, lenslets, shape, pixel_um, z_max_um=float(np.max(np.abs(z_um))))
-        shift = float(np.abs(self.psf.tilt).max() * np.max(np.abs(z_um))) / pixel_um  # parallax, px
+        shift = float(np.abs(self.psf.shift_um(np.max(np.abs(z_um)))).max()) / pixel_um  # the largest parallax, px
         n = [sfft.next_fast_len(int(s + self.psf.support_px + 2 * math.ceil(shift)), real=True) for s in shape]
         self.fft_shape = tuple(n)
         # the OTFs vanish outside |f| ≤ 2ρ (autocorrelation of the sub-aperture): keep that band

@@ -79,12 +79,15 @@ class RunConfig(SettingsModel):
         return RunConfig.of(self.optics, self.reconstruction, **changes)
 
     @classmethod
-    def from_yaml(cls, path: str | Path) -> RunConfig:
+    def from_yaml(cls, path: str | Path, default_optics: Optics | None = None) -> RunConfig:
         """Read a run configuration (or an optics file with a ``reconstruction:`` section).
 
         Parameters
         ----------
         path : str or Path
+        default_optics : Optics, optional
+            The optics where the file has no ``optics:`` section (the calibration's); default the
+            paper's.
 
         Returns
         -------
@@ -95,9 +98,14 @@ class RunConfig(SettingsModel):
             data = dict(data)
             rec = data.pop("reconstruction", None) or {}
             data = {"optics": data, "reconstruction": rec}
-        if "optics" not in data and "reconstruction" not in data:
-            raise SsdpcError(f"{path}: expected 'optics:' and 'reconstruction:' sections (a run configuration)")
-        optics = Optics.from_dict(data.get("optics") or Optics.paper().to_dict(), source=f"{path} optics")
+        if not {"optics", "reconstruction", "outputs"} & set(data):
+            raise SsdpcError(
+                f"{path}: expected 'optics:', 'reconstruction:' or 'outputs:' sections (a run configuration)"
+            )
+        if data.get("optics"):
+            optics = Optics.from_dict(data["optics"], source=f"{path} optics")
+        else:
+            optics = default_optics or Optics.paper()
         rec = ReconstructionSettings.from_dict(data.get("reconstruction") or {}, source=f"{path} reconstruction")
         outputs = OutputSettings.from_dict(data.get("outputs") or {}, source=f"{path} outputs")
         extra = sorted(set(data) - {"optics", "reconstruction", "outputs"})

@@ -24,8 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
-STANDARD = {"z": (-80.0, 80.0), "dz": 1.0, "rl": {"iterations": 10}, "method": "rl"}
-QUICK = {"z": (-80.0, 80.0), "dz": 16.0, "rl": {"iterations": 3}, "method": "rl"}
+from napari_ssdpc.reconstruction.methods import METHODS
+from napari_ssdpc.settings.reconstruction import DEFAULT_Z_UM
+
+STANDARD = {"z": DEFAULT_Z_UM, "dz": 1.0, "rl": {"iterations": 10}, "method": "rl"}
+QUICK = {"z": DEFAULT_Z_UM, "dz": 16.0, "rl": {"iterations": 3}, "method": "rl"}
 #: the regularised method's standard case: 121 planes at condenser NA 0.25 (16 lit lenslets)
 TV_CASE = {"z": (-60.0, 60.0), "dz": 1.0, "rl": {"iterations": 10}, "method": "tv"}
 TV_NA = 0.25
@@ -363,12 +366,13 @@ def run_bench(
     )
     say(f"  build {st['fast']['build_s']:.1f} s, frame {st['fast']['frame_s']:.2f} s")
 
-    say("default method 'wotf' (3D Tikhonov, no RL stacks)")
-    _, _, st["wotf"] = fast_path(case, cal, {**cfg, "method": "wotf"}, device, stacks=False)
-
-    say("default method 'tv' (TV with the physical constraints, no RL stacks)")
-    _, tv_res, st["tv"] = fast_path(case, cal, {**cfg, "method": "tv"}, device, stacks=False, repeats=1)
-    _tv_iterations(st["tv"], tv_res, say)
+    for name, entry in METHODS.items():  # every registered method beside the standard case's
+        if name == cfg["method"]:
+            continue
+        say(f"method '{name}' ({entry.summary}), no RL stacks")
+        _, m_res, st[name] = fast_path(case, cal, {**cfg, "method": name}, device, stacks=False)
+        if "tv_iterations_run" in m_res.settings:
+            _tv_iterations(st[name], m_res, say)
 
     if high_na_case is not False and not quick:
         say(f"'tv' on its standard case: 121 planes, condenser NA {TV_NA:g}, beside 'wotf' (Tikhonov)")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+from napari_ssdpc.reconstruction.methods import METHODS
 from napari_ssdpc.validation.bench import TV_NA
 
 __all__ = ["format_report"]
@@ -49,8 +50,7 @@ def format_report(report) -> str:
     rows = []
     for key, label in (
         ("fast", "fast, NA 0.1 (standard)"),
-        ("wotf", "fast, method wotf, NA 0.1"),
-        ("tv", "fast, method tv, NA 0.1"),
+        *((name, f"fast, method {name}, NA 0.1") for name in METHODS),  # one row per registered method
         ("wotf_tv_case", f"method wotf, NA {TV_NA:g}"),
         ("tv_case", f"method tv, NA {TV_NA:g}"),
         ("fast_na0.3", "fast, NA 0.3"),

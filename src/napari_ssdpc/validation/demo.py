@@ -14,6 +14,7 @@ from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.progress import tqdm_callback
 from napari_ssdpc.reconstruction.reconstructor import Reconstructor
 from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.settings.reconstruction import DEFAULT_Z_UM
 from napari_ssdpc.simulation import phantoms
 from napari_ssdpc.simulation.sample_free import flat_frame, white_frame
 from napari_ssdpc.simulation.simulate import simulate
@@ -24,7 +25,7 @@ from napari_ssdpc.validation.figures import bead_figure
 DEMO_FILES = ("bead.tif", "flat.tif", "white.tif", "calibration.json", "calibration.png", "ri.ome.tif", "summary.png")
 
 
-def run_demo(out: Path, optics: Optics | None = None, seed: int = 0, z=(-80.0, 80.0), dz: float = 1.0) -> dict:
+def run_demo(out: Path, optics: Optics | None = None, seed: int = 0, z=DEFAULT_Z_UM, dz: float = 1.0) -> dict:
     """``ssdpc demo``: simulate the PMMA bead, calibrate, reconstruct, write and summarise.
 
     Parameters
