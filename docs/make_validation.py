@@ -31,8 +31,8 @@ IMAGES = DOCS / "images"
 RESOLUTION = (20.7, 3.9)  # (R_z, R_xy) µm from `ssdpc design`
 METHODS = {
     "wotf": dict(method="wotf"),
-    "rl-lenslet": dict(method="rl", model="lenslet"),
-    "rl-paper": dict(method="rl", model="paper"),
+    "rl-lenslet": dict(method="rl", rl={"model": "lenslet"}),
+    "rl-paper": dict(method="rl", rl={"model": "paper"}),
 }
 
 
@@ -105,7 +105,7 @@ def main():
     case = val.simulate_case("bars", ph.bar_target(), optics, cache_dir=args.cache)
     out["cases"]["bars"] = {"simulation_s": case.seconds}
     for iterations in (40, 15):  # the figure shows the default (15)
-        res, cal, rec = val.reconstruct_case(case, z=(0, 80), method="rl", stacks=True, iterations=iterations)
+        res, cal, rec = val.reconstruct_case(case, z=(0, 80), method="rl", stacks=True, rl={"iterations": iterations})
         m = val.bar_metrics(res, case.phantom)
         out["cases"]["bars"][f"iterations_{iterations}"] = _clean(m)
     iz = int(np.argmin(abs(res.z_um - case.phantom.z_um)))
