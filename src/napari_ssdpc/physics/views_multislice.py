@@ -1,0 +1,413 @@
+"""Multislice (beam-propagation) model of the flat-fielded views, and the gradient of its misfit.
+
+The first-order model of the views (paper Eqs. 2-4: each view's contrast is the sum over slabs of
+its defocused weak-object transfer function times the slab's phase) fails on strong objects. This
+module predicts the views of a Δn volume without that approximation, with the instrument's scalar
+wave optics (the multislice forward models of intensity diffraction tomography: Kamilov et al.,
+"Optical tomographic image reconstruction based on beam propagation and sparse regularization",
+IEEE TCI 2016; Chowdhury et al., "High-resolution 3D refractive index microscopy of multiple-
+scattering samples from intensity images", Optica 2019):
+
+1. Köhler illumination (paper Eq. 2, Abbe's method): plane waves U = exp(i2π w·x) from source points
+   w over the condenser disk |w| ≤ NA_c/λ on a square lattice of their own spacing
+   (:func:`~napari_ssdpc.physics.waves.kohler_source`), each weighted by its area in the disk;
+   their intensities add. The points are not tied to the grid's frequency lattice: a tilted
+   plane wave is carried as its envelope, which is periodic for any w.
+2. Multislice through the volume, far side (largest z) first: every voxel of thickness dz is cut
+   into ``substeps`` slabs of thickness δ, each a phase screen t = exp(i2π Δn δ / λ) followed by
+   angular-spectrum propagation over δ in the medium, H_δ(u) = exp(i2π δ [η(u + w) − η(w)])
+   (paper Eq. 6, on the envelope V = U exp(−i2π w·x) of the tilted wave).
+3. From the last screen (depth z_exit) to the focal plane (the same propagation over z_exit), then
+   the objective pupil and each lenslet's sub-aperture A_k = P_obj · circ(|u − u_k| ≤ ρ) (paper
+   Eq. 2; docs/conventions.md), evaluated exactly (hard edges) at the absolute frequencies
+   u = w_j + lattice frequency of an m x m crop of the exit spectrum around u_k − w_j: one coherent
+   image g_jk per source point j and lenslet k, I_k = Σ_j s_j |g_jk|². The periodic sample's
+   spectrum lives on the lattice, so this is exact for it; the source sum is the one quadrature.
+4. The band-limited I_k (bandwidth 2ρ) is Fourier-interpolated onto the views' pixels, averaged
+   over the sensor pixel (a sinc, optional), and divided by the same model's sample-free view I0_k:
+   the direct-light background is 1, as in the flat-fielded data
+   (:class:`~napari_ssdpc.reconstruction.contrast.ViewContrast`).
+
+The grid is periodic: a square region of interest (ROI) of the views' object grid, sampled
+``refine`` times finer; light scattered beyond the ROI re-enters on the other side, so the ROI needs
+a margin around the sample. For the pair (source point j, lenslet k) only the part of A_k that lies
+inside the grid's band (|u − w| < 1 / (2 dx) per axis) is modelled: light scattered farther from
+the illumination is left out (docs/nonlinear.md measures what that costs).
+
+The gradient of the misfit ½ Σ_k ‖W (I_k / I0_k − m_k)‖² with respect to every voxel is
+back-propagated by hand through the intensity, the filters, the propagation and the phase screens.
+With u_i the field just after screen i and G_i its gradient (∂L/∂u_i* x 2):
+∂L/∂Δn_i = (2π δ / λ) Σ_j Im(u_i* G_i), and G_{i−1} = H_δ* ⊛ (t_i* G_i).
+
+Arrays live in the module ``xp`` (NumPy by default, or CuPy); FFTs are unnormalised forward.
+Frequencies are in cycles/µm, lengths in µm.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.fft as sfft
+
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.physics.pupil import eta
+from napari_ssdpc.physics.waves import defocus_factor, kohler_source
+from napari_ssdpc.settings.optics import Optics
+
+__all__ = ["ViewsMultislice", "square_roi"]
+
+
+def _even_fast(m: int) -> int:
+    """The smallest even FFT-friendly size >= ``m``."""
+    m = sfft.next_fast_len(max(int(m), 2))
+    while m % 2:
+        m = sfft.next_fast_len(m + 1)
+    return m
+
+
+def square_roi(x_um, y_um, centre_um=(0.0, 0.0), side_um: float = 40.0) -> tuple[slice, slice]:
+    """A square region of the views' grid around ``centre_um``, of an even FFT-friendly side.
+
+    Parameters
+    ----------
+    x_um, y_um : array_like, (w,), (h,)
+        The views' grid (pixel centres), µm from the optical axis.
+    centre_um : (float, float)
+        (x, y) of the region's centre, µm.
+    side_um : float
+        Smallest side, µm: the sample plus the margin its scattered light needs.
+
+    Returns
+    -------
+    rows, cols : slice
+        The region on the views' grid (equal lengths), shifted to lie inside it.
+    """
+    x, y = np.asarray(x_um, float), np.asarray(y_um, float)
+    px = float(x[1] - x[0])
+    side = _even_fast(int(math.ceil(side_um / px)))
+    if side > min(len(x), len(y)):
+        side = min(len(x), len(y)) // 2 * 2
+    out = []
+    for c, grid in ((centre_um[1], y), (centre_um[0], x)):
+        i0 = int(np.argmin(np.abs(grid - c))) - side // 2
+        i0 = min(max(i0, 0), len(grid) - side)
+        out.append(slice(i0, i0 + side))
+    return out[0], out[1]
+
+
+class ViewsMultislice:
+    """The flat-fielded views of a Δn volume by multislice, and the gradient of their misfit.
+
+    Parameters
+    ----------
+    optics : Optics
+        Wavelength, medium, objective and condenser NA, sub-aperture radius.
+    lenslets : list of Lenslet or array_like, (K, 2)
+        The views' lenslets (their ``u``), or the sub-aperture centres u_k (x, y), cycles/µm.
+    x_um, y_um : array_like, (w,), (h,)
+        The views' object grid (pixel centres, evenly spaced), µm from the optical axis.
+    z_um : array_like, (Z,)
+        Voxel centres of the volume, µm, increasing and evenly spaced (z > 0: farther from the
+        objective).
+    roi : (slice, slice), optional
+        Rows and columns of the views' grid the model covers (equal lengths; :func:`square_roi`);
+        default the whole grid (which must be square).
+    refine : int
+        Model samples per view pixel along x and y (the model grid is ``refine`` times finer).
+    substeps : int
+        Multislice slabs per voxel (slab thickness dz / substeps).
+    dz_um : float, optional
+        Voxel thickness, µm; default the spacing of ``z_um`` (needed for a single plane).
+    source_spacing_na : float
+        Spacing of the source points in NA units (sin of the angle): the fewer points, the
+        cheaper the model and the coarser its partial coherence.
+    pixel_integration : bool
+        Average the intensity over the sensor pixel (one view pixel), as the camera does.
+    chunk : int
+        Source points propagated at a time (memory: ``chunk`` x (side·refine)² fields per slab).
+    dtype : numpy dtype
+        Complex dtype of the fields (complex64; complex128 for gradient checks).
+    xp : module, optional
+        Array module (``numpy`` by default, or ``cupy``); inputs and outputs live there.
+    memory_mb : float
+        Largest memory for the fields kept between the forward and the backward pass; beyond it
+        the backward pass recomputes them (a third propagation).
+
+    Attributes
+    ----------
+    shape : tuple of int
+        (Z, ny, nx) of the Δn volume the model takes.
+    x_um, y_um : ndarray, (nx,), (ny,)
+        The model grid, µm.
+    view_shape : tuple of int
+        (K, h, w) of the views it predicts, on the ROI of the views' grid.
+    rows, cols : slice
+        The ROI on the views' grid.
+    i0 : ndarray, (K,)
+        The model's sample-free intensity of every view (the divisor of the flat field).
+    n_sources : int
+        Source points.
+    """
+
+    def __init__(
+        self,
+        optics: Optics,
+        lenslets,
+        x_um,
+        y_um,
+        z_um,
+        *,
+        roi=None,
+        refine: int = 1,
+        substeps: int = 1,
+        dz_um: float | None = None,
+        source_spacing_na: float = 0.04,
+        pixel_integration: bool = True,
+        chunk: int = 32,
+        dtype=np.complex64,
+        xp=None,
+        memory_mb: float = 2048.0,
+    ):
+        self.xp = np if xp is None else xp
+        self.cdtype = np.dtype(dtype)
+        self.rdtype = np.finfo(self.cdtype).dtype
+        lam, nm = optics.wavelength_um, optics.medium_index
+        x, y = np.asarray(x_um, float), np.asarray(y_um, float)
+        px = float(x[1] - x[0])
+        self.rows: slice = roi[0] if roi is not None else slice(0, len(y))
+        self.cols: slice = roi[1] if roi is not None else slice(0, len(x))
+        vy, vx = y[self.rows], x[self.cols]
+        if len(vy) != len(vx) or len(vx) < 4:
+            raise SsdpcError(f"the model's region must be square, got {len(vy)} x {len(vx)} view pixels")
+        refine, substeps = int(refine), int(substeps)
+        if refine < 1 or substeps < 1:
+            raise SsdpcError("refine and substeps must be positive integers")
+        z = np.atleast_1d(np.asarray(z_um, float))
+        dz = float(dz_um) if dz_um is not None else float(z[1] - z[0]) if len(z) > 1 else 0.0
+        if dz <= 0 or (len(z) > 1 and np.ptp(np.diff(z)) > 1e-6 * dz):
+            raise SsdpcError("z_um must increase evenly (or give dz_um for a single plane)")
+        self.nv = nv = len(vx)
+        self.n = n = nv * refine
+        self.dx, self.dz, self.z_um, self.substeps = px / refine, dz, z, substeps
+        self.x_um, self.y_um = vx[0] + self.dx * np.arange(n), vy[0] + self.dx * np.arange(n)
+        self.shape = (len(z), n, n)
+        self.delta = dz / substeps  # slab thickness, µm
+        self.kappa = 2 * math.pi * self.delta / lam  # phase per unit Δn of one slab, rad
+        z_exit = float(z[0] - dz / 2 + self.delta / 2)  # centre of the slab nearest the objective
+        du = 1.0 / (nv * px)
+        # --- source points over the condenser disk (paper Eq. 2), on their own lattice ----------
+        _, w, wgt = kohler_source(optics.source_radius, source_spacing_na / lam, 1)
+        self.n_sources = len(w)
+        # --- propagation, per source point: exp(i2π d [η(u + w) − η(w)]) (Eq. 6), over one slab
+        # and from the last slab to the focal plane
+        f = np.fft.fftfreq(n, self.dx)
+        u2 = (f[None, None, :] + w[:, 0, None, None]) ** 2 + (f[None, :, None] + w[:, 1, None, None]) ** 2
+        e, e0 = eta(u2, nm, lam), eta(np.sum(w * w, axis=1), nm, lam).real[:, None, None]
+        h = defocus_factor(e, self.delta) * np.exp(-2j * np.pi * self.delta * e0)
+        h_exit = defocus_factor(e, z_exit) * np.exp(-2j * np.pi * z_exit * e0)
+        # --- lenslet crops: an m x m crop of the exit spectrum around u_k − w_j, for every pair ----
+        self.rho, self.cut = optics.subaperture_radius, optics.cutoff
+        self.m = m = min(_even_fast(int(math.ceil(4 * self.rho / du)) + 4), nv)
+        u_k = np.array([ln.u for ln in lenslets] if not isinstance(lenslets, np.ndarray) else lenslets, float)
+        off = np.arange(m) - m // 2
+        c = np.rint((u_k[None] - w[:, None]) / du).astype(int)  # (S, K, 2): crop centres, lattice units
+        ex, ey = c[..., 0, None] + off, c[..., 1, None] + off  # (S, K, m): envelope-grid indices
+        ux, uy = w[:, None, 0, None] + ex * du, w[:, None, 1, None] + ey * du  # absolute frequencies
+        inx = (ex >= -(n // 2)) & (ex < n - n // 2)  # inside the grid's band
+        iny = (ey >= -(n // 2)) & (ey < n - n // 2)
+        # |u − u_k|² and |u|² per axis, with +inf where out of band: A_k = 0 there
+        big = np.float32(np.inf)
+        self._dx2 = np.where(inx, (ux - u_k[None, :, 0, None]) ** 2, big).astype(np.float32)
+        self._dy2 = np.where(iny, (uy - u_k[None, :, 1, None]) ** 2, big).astype(np.float32)
+        self._rx2, self._ry2 = (ux**2).astype(np.float32), (uy**2).astype(np.float32)
+        # --- intensity: m-crop grid -> the views' pixels (Fourier interpolation, pixel sinc) -----
+        fm = np.fft.fftfreq(m, 1.0 / m).astype(int)
+        pix = np.sinc(px * fm * du) if pixel_integration else np.ones(m)
+        self.view_shape = (len(u_k), nv, nv)
+        xp_ = self.xp
+        self._h = xp_.asarray(h.astype(self.cdtype))
+        self._h_exit = xp_.asarray(h_exit.astype(self.cdtype))
+        self._wgt = xp_.asarray(wgt.astype(self.rdtype))
+        self._ey, self._ex = xp_.asarray(ey % n), xp_.asarray(ex % n)
+        self._dx2, self._dy2, self._rx2, self._ry2 = (
+            xp_.asarray(a) for a in (self._dx2, self._dy2, self._rx2, self._ry2)
+        )
+        self._band = xp_.asarray(fm % nv)
+        self._pix = xp_.asarray((pix[:, None] * pix[None, :]).astype(self.rdtype))
+        self.chunk = max(1, int(chunk))
+        self.memory_mb = float(memory_mb)
+        i0 = self._interpolate(self._intensity(None)[0])  # sample-free views: constant per lenslet
+        self.i0 = np.asarray(_host(xp_, i0.mean(axis=(1, 2))), float)
+        if np.any(self.i0 <= 1e-6 * self.i0.max()):
+            dark = np.flatnonzero(self.i0 <= 1e-6 * self.i0.max()).tolist()
+            raise SsdpcError(
+                f"views {dark} receive no direct light from the model's source points: keep only lit "
+                "lenslets, or make source_spacing_na smaller"
+            )
+        self._i0 = xp_.asarray(self.i0.astype(self.rdtype))[:, None, None]
+
+    # ------------------------------------------------------------------------------- FFTs
+    def _fft2(self, a):
+        return sfft.fft2(a, workers=-1) if self.xp is np else self.xp.fft.fft2(a)
+
+    def _ifft2(self, a):
+        return sfft.ifft2(a, workers=-1) if self.xp is np else self.xp.fft.ifft2(a)
+
+    # --------------------------------------------------------------------------- forward
+    def _screens(self, dn):
+        """exp(i κ Δn) of every voxel, in propagation order (far side first), (Z, n, n)."""
+        dn = self.xp.asarray(dn, self.rdtype)
+        if dn.shape != self.shape:
+            raise SsdpcError(f"Δn volume of shape {tuple(dn.shape)}; the model takes {self.shape}")
+        return self.xp.exp((1j * self.kappa) * dn[::-1]).astype(self.cdtype)
+
+    def _chunks(self):
+        return [slice(s, min(s + self.chunk, self.n_sources)) for s in range(0, self.n_sources, self.chunk)]
+
+    def _pair_filter(self, sl):
+        """A_k = P_obj · circ(|u − u_k| ≤ ρ) on the crops of the source points ``sl``, zero outside
+        the grid's band: (s, K, m, m), 0 or 1."""
+        sub = self._dy2[sl, :, :, None] + self._dx2[sl, :, None, :] <= self.rho**2
+        pupil = self._ry2[sl, :, :, None] + self._rx2[sl, :, None, :] <= self.cut**2
+        return (sub & pupil).astype(self.rdtype)
+
+    def _gather(self, sl):
+        """Indices of the crops in a (s, n, n) spectrum: (s, 1, 1, 1), (s, K, m, 1), (s, K, 1, m)."""
+        j = self.xp.arange(sl.stop - sl.start)[:, None, None, None]
+        return j, self._ey[sl, :, :, None], self._ex[sl, :, None, :]
+
+    def _propagate_chunk(self, screens, sl, keep: bool):
+        """Lenslet fields g (s, K, m, m) of the source points ``sl``, and the fields after every
+        screen (a list, far side first) when ``keep``."""
+        xp, s = self.xp, sl.stop - sl.start
+        kept = []
+        if screens is None:  # no sample: the plane wave's envelope is 1
+            spec = xp.zeros((s, self.n, self.n), self.cdtype)
+            spec[:, 0, 0] = self.n * self.n * self._h_exit[sl, 0, 0]
+        else:
+            u = xp.ones((s, self.n, self.n), self.cdtype)
+            for i in range(len(screens) * self.substeps):
+                if i:
+                    u = self._ifft2(self._fft2(u) * self._h[sl])  # one slab of medium (Eq. 6)
+                u = u * screens[i // self.substeps]
+                if keep:
+                    kept.append(u)
+            spec = self._fft2(u) * self._h_exit[sl]  # to the focal plane (Eq. 6)
+        g = self._ifft2(spec[self._gather(sl)] * self._pair_filter(sl))
+        return g.astype(self.cdtype, copy=False), kept
+
+    def _intensity(self, screens, keep: bool = False):
+        """Σ_j s_j |g_jk|² on the crop grid (K, m, m), and per chunk what the backward pass needs."""
+        acc = self.xp.zeros((self.view_shape[0], self.m, self.m), self.rdtype)
+        store = []
+        for sl in self._chunks():
+            g, kept = self._propagate_chunk(screens, sl, keep)
+            acc += self.xp.einsum("j,jkyx->kyx", self._wgt[sl], (g.real**2 + g.imag**2))
+            store.append((g, kept) if keep else None)
+        return acc, store
+
+    def _interpolate(self, im):
+        """E: (K, m, m) intensity on the crop grid -> (K, nv, nv) on the views' pixels."""
+        xp, nv, m = self.xp, self.nv, self.m
+        spec = self._fft2(im) * self._pix
+        out = xp.zeros((im.shape[0], nv, nv), spec.dtype)
+        out[:, self._band[:, None], self._band[None, :]] = spec
+        return (self._ifft2(out).real * (nv * nv / (m * m))).astype(self.rdtype)
+
+    def _interpolate_adjoint(self, grad):
+        """Eᵀ: (K, nv, nv) -> (K, m, m), the exact transpose of :meth:`_interpolate`."""
+        nv, m = self.nv, self.m
+        spec = self._fft2(grad)[:, self._band[:, None], self._band[None, :]] / (nv * nv)
+        return (self._ifft2(spec * self._pix).real * (m * m) * (nv * nv / (m * m))).astype(self.rdtype)
+
+    def views(self, dn):
+        """The flat-fielded views I_k / I0_k of a Δn volume on the ROI.
+
+        Parameters
+        ----------
+        dn : ndarray, (Z, ny, nx)
+            Δn = n − n_medium of every voxel on the model grid (:attr:`shape`), dimensionless.
+
+        Returns
+        -------
+        ndarray, (K, h, w), float32 (float64 with complex128 fields)
+            1 where a view holds only direct light.
+        """
+        acc, _ = self._intensity(self._screens(dn))
+        return self._interpolate(acc) / self._i0
+
+    def crop(self, views):
+        """The model's region of views on the whole views' grid.
+
+        Parameters
+        ----------
+        views : ndarray, (K, H, W)
+            Views on the whole object grid (e.g. from ``ViewContrast``).
+
+        Returns
+        -------
+        ndarray, (K, h, w)
+            ``views[:, rows, cols]``.
+        """
+        return views[:, self.rows, self.cols]
+
+    # -------------------------------------------------------------------------- adjoint
+    def misfit(self, dn, measured, weight=None):
+        """½ Σ_k ‖W (I_k / I0_k − m_k)‖² and its gradient with respect to Δn.
+
+        Parameters
+        ----------
+        dn : ndarray, (Z, ny, nx)
+            Δn of every voxel on the model grid, dimensionless.
+        measured : ndarray, (K, h, w)
+            The flat-fielded views on the ROI (:meth:`crop`).
+        weight : ndarray, broadcastable to (K, h, w), optional
+            W² per pixel (e.g. the field stop, 0/1, or inverse variances); default 1.
+
+        Returns
+        -------
+        value : float
+            The misfit, (flat-field units)².
+        grad : ndarray, (Z, ny, nx)
+            ∂misfit/∂Δn of every voxel, in the array module of the model.
+        """
+        xp = self.xp
+        screens = self._screens(dn)
+        n_fields = len(screens) * self.substeps * self.n_sources * self.n * self.n
+        keep = n_fields * self.cdtype.itemsize / 2**20 <= self.memory_mb
+        acc, store = self._intensity(screens, keep)
+        res = self._interpolate(acc) / self._i0 - xp.asarray(measured, self.rdtype)
+        wres = res if weight is None else res * xp.asarray(weight, self.rdtype)
+        value = 0.5 * float(xp.sum(res * wres))
+        g_i = self._interpolate_adjoint(wres / self._i0)  # ∂L/∂I on the crop grid, (K, m, m)
+        grad = xp.zeros((len(screens) * self.substeps, self.n, self.n), self.rdtype)
+        for sl, st in zip(self._chunks(), store):
+            g, kept = st if st is not None else self._propagate_chunk(screens, sl, True)
+            self._backward_chunk(screens, sl, g, kept, g_i, grad)
+        grad = grad.reshape(len(screens), self.substeps, self.n, self.n).sum(axis=1)[::-1]
+        return value, xp.ascontiguousarray(grad)
+
+    def _backward_chunk(self, screens, sl, g, kept, g_i, grad):
+        """Add the source points ``sl``'s part of ∂L/∂Δn per slab to ``grad`` (far side first)."""
+        xp, n, s = self.xp, self.n, sl.stop - sl.start
+        # I = Σ s_j |g|²: ∂L/∂g* x 2 = 2 s_j (∂L/∂I) g; g = ifft_m(crop · F): its adjoint is fft_m / m²
+        gg = (2 * self._wgt[sl, None, None, None]) * g_i[None] * g
+        gc = self._fft2(gg) * (self._pair_filter(sl) / (self.m * self.m))
+        j, r, c = self._gather(sl)
+        flat = ((j * n + r) * n + c).ravel()
+        spec = xp.bincount(flat, weights=gc.real.ravel(), minlength=s * n * n) + 1j * xp.bincount(
+            flat, weights=gc.imag.ravel(), minlength=s * n * n
+        )
+        spec = spec.reshape(s, n, n).astype(self.cdtype) * xp.conj(self._h_exit[sl])
+        gu = self._ifft2(spec) * (n * n)  # fftᴴ = n² ifft
+        for i in range(len(kept) - 1, -1, -1):
+            # u_i = t_i · p_i: ∂L/∂Δn_i = κ Im(u_i* G_i); G_{i−1} = H* ⊛ (t_i* G_i)
+            grad[i] += self.kappa * xp.sum(xp.imag(xp.conj(kept[i]) * gu), axis=0)
+            if i:
+                gu = self._ifft2(self._fft2(xp.conj(screens[i // self.substeps]) * gu) * xp.conj(self._h[sl]))
+
+
+def _host(xp, a):
+    """A NumPy copy of an array of ``xp``."""
+    return a.get() if hasattr(a, "get") and xp is not np else np.asarray(a)
