@@ -190,7 +190,7 @@ def test_run_config_round_trip_and_optics_file_with_reconstruction(tmp_path, pap
         ({"z_min_um": 10.0, "z_max_um": -10.0}, "z range is empty"),
         ({"tikhonov_alpha": float("inf")}, "finite"),
         ({"rl_iterations": None}, "must be a whole number"),
-        ({"method": "magic"}, "must be 'tv', 'wotf' or 'rl'"),
+        ({"method": "magic"}, "must be 'tv', 'wotf', 'rl' or 'multislice'"),
         ({"dn_max": 0.0}, "'tv.dn_max' must be positive"),
         ({"tv_lambda": -1.0}, "'tv.lambda_scale' must be positive"),
         ({"sign": "positive"}, "must be 'auto', 'denser', 'lighter' or 'any'"),

@@ -17,7 +17,7 @@ from napari_ssdpc.reconstruction.methods import METHODS
 from napari_ssdpc.settings.config import RunConfig
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.settings.outputs import SAVE_CHOICES, OutputSettings
-from napari_ssdpc.settings.reconstruction import DEFAULT_Z_UM, ReconstructionSettings
+from napari_ssdpc.settings.reconstruction import DEFAULT_Z_UM, ReconstructionSettings, alpha_section
 
 __all__ = ["FLAGS", "add_reconstruction_options", "run_config"]
 
@@ -91,6 +91,13 @@ def add_reconstruction_options(parser: argparse.ArgumentParser) -> None:
         if flag == "method":
             text = "phase method: " + "; ".join(f"{n}: {e.summary}" for n, e in METHODS.items()) + " (default tv)"
         parser.add_argument(f"--{flag}", type=kind, choices=choices, help=text)
+    parser.add_argument(
+        "--roi",
+        type=float,
+        nargs=4,
+        metavar=("XMIN", "XMAX", "YMIN", "YMAX"),
+        help="region the 'multislice' model covers, µm from the optical axis (default: around the objects)",
+    )
     parser.add_argument("--save", help=f"extra outputs, comma separated: {','.join(SAVE_CHOICES)}")
 
 
@@ -122,12 +129,14 @@ def run_config(args: argparse.Namespace, optics: Optics | None, fallback: Optics
             continue
         section, _, name = key.rpartition(".")
         if section:
-            section = method if section == "*" else section
+            section = alpha_section(method) if section == "*" else section
             data[section] = {**data[section], name: value}
         else:
             data[name] = value
     if getattr(args, "z", None) is not None:
         data.update(z_min_um=float(args.z[0]), z_max_um=float(args.z[1]))
+    if getattr(args, "roi", None) is not None:
+        data["multislice"] = {**data["multislice"], "roi_um": [float(v) for v in args.roi]}
     rec = ReconstructionSettings.from_dict(data, source="command line")
     save = getattr(args, "save", None)
     outputs = cfg.outputs if save is None else OutputSettings.from_dict({"save": save}, source="--save")

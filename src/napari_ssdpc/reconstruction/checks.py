@@ -122,8 +122,9 @@ def estimate_memory(optics, cal, settings, stacks: bool) -> dict:
     k = max(1, len(cal.lenslets))
     with_rl = stacks
     # (K x Z x band) complex64 operators: WOTF once, RL per half (each lenslet in two halves)
-    ops = k * planes * (view // 2) * 8 * ((settings.method in ("wotf", "tv")) + 2 * with_rl)
-    if settings.method == "tv":  # its operator on the padded z grid, and ~12 ADMM work arrays
+    tv = settings.method in ("tv", "multislice")  # the multislice method starts from the tv solution
+    ops = k * planes * (view // 2) * 8 * ((settings.method == "wotf" or tv) + 2 * with_rl)
+    if tv:  # its operator on the padded z grid, and ~12 ADMM work arrays
         padded = planes + 2 * math.ceil(25.0 / settings.dz_um)
         ops += k * padded * (view // 2) * 8 + 12 * padded * view * 8
     if with_rl:  # per half and plane: padded (~1.7x view side) support and normalisation arrays

@@ -47,7 +47,7 @@ from napari_ssdpc.reconstruction.forward import ViewModel, apply
 from napari_ssdpc.reconstruction.tv_report import TvReport
 from napari_ssdpc.settings.reconstruction import SIGNS
 
-__all__ = ["LAMBDA_PER_NOISE", "TvInversion"]
+__all__ = ["LAMBDA_PER_NOISE", "TvInversion", "bounds"]
 
 #: ℓ of the sparsity term μ‖φ‖₁ with μ = λ/ℓ, in units of the axial resolution R_z: without it a
 #: constant offset inside the field stop (the unmeasured slice mean) costs only its boundary.
@@ -280,7 +280,7 @@ class TvInversion:
             tv = self._update_gradients(g, z1, u1, thresh)
             penalty = lam_abs * (tv + float(abs(phi).sum()) / self.sparsity_um)
             report.objective.append(0.5 * self._data(fwd, band) + penalty * cell)
-            self._update_constraints(phi, z2, u2, l1, _bounds(sign, phi_max), scratch=g[0])
+            self._update_constraints(phi, z2, u2, l1, bounds(sign, phi_max), scratch=g[0])
             report.relative_change.append(change)
             report.iterations = it + 1
             if progress is not None:
@@ -331,7 +331,7 @@ class TvInversion:
         return phi, report
 
     def _project(self, phi, sign, phi_max):
-        return self.xp.clip(phi, *_bounds(sign, phi_max)) * self._mask
+        return self.xp.clip(phi, *bounds(sign, phi_max)) * self._mask
 
     def _parts(self, part) -> float:
         """Σ ``part(planes)``: one part per core on the CPU (NumPy releases the GIL), the whole
@@ -381,6 +381,16 @@ class TvInversion:
         return self._parts(part)
 
 
-def _bounds(sign, phi_max) -> tuple[float, float]:
-    """(lo, hi) of φ for a sign constraint and a bound |φ| ≤ φ_max."""
+def bounds(sign, phi_max) -> tuple[float, float]:
+    """(lo, hi) of φ for a sign constraint and a bound |φ| ≤ φ_max (any unit: Δn too).
+
+    Parameters
+    ----------
+    sign : {'denser', 'lighter', 'any'}
+    phi_max : float
+
+    Returns
+    -------
+    tuple of float
+    """
     return (0.0 if sign == "denser" else -phi_max, 0.0 if sign == "lighter" else phi_max)

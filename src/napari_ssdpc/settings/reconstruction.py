@@ -34,17 +34,19 @@ __all__ = [
     "SIGNS",
     "TRANSFER_MODELS",
     "MethodName",
+    "MultisliceSettings",
     "ReconstructionSettings",
     "RlSettings",
     "Sign",
     "TvSettings",
     "WotfSettings",
+    "alpha_section",
     "plane_count",
 ]
 
 #: The phase methods, in the order the CLI and napari list them (their solvers:
 #: :data:`napari_ssdpc.reconstruction.methods.METHODS`).
-MethodName = Literal["tv", "wotf", "rl"]
+MethodName = Literal["tv", "wotf", "rl", "multislice"]
 PHASE_METHODS: tuple[str, ...] = get_args(MethodName)
 #: The sign of Δn against the medium: cells in water are denser, PMMA beads in oil lighter.
 Sign = Literal["auto", "denser", "lighter", "any"]
@@ -72,6 +74,21 @@ def plane_count(z_min_um: float, z_max_um: float, dz_um: float) -> int:
     int
     """
     return int(math.floor((z_max_um - z_min_um) / dz_um + 1e-6)) + 1
+
+
+def alpha_section(method: str) -> str:
+    """The section that holds a method's Tikhonov α (the multislice method starts from 'tv').
+
+    Parameters
+    ----------
+    method : str
+        A phase method.
+
+    Returns
+    -------
+    str
+    """
+    return "tv" if method == "multislice" else method
 
 
 def _alpha(default: float, scale: str) -> Any:
@@ -113,6 +130,40 @@ class RlSettings(SettingsModel):
     model: TransferModel = Field("lenslet", description="DPC transfer-function model")
 
 
+class MultisliceSettings(SettingsModel):
+    """The 'multislice' method: the 'tv' solution refined with a multislice model of the views
+    (refraction and multiple scattering), for strong objects."""
+
+    #: Keys read at every solve (the model is built per frame, around its objects).
+    runtime: ClassVar[frozenset[str]] = frozenset(
+        {"iterations", "source_spacing_na", "substeps", "refine", "roi_margin_um", "z_margin_um", "roi_um", "tv_weight"}
+    )
+
+    iterations: int = bounded(20, 1, 500, "most gradient iterations of the refinement")
+    source_spacing_na: float = bounded(
+        0.03, 0.005, 0.5, "spacing of the model's source points over the condenser disk, NA units"
+    )
+    substeps: int = bounded(1, 1, 8, "multislice slabs per plane")
+    refine: int = bounded(
+        2, 1, 4, "model samples per view pixel along x and y (2: the light a strong object bends stays in band)"
+    )
+    roi_margin_um: float = bounded(12.0, 0.0, 500.0, "margin of the model's region around the objects, µm")
+    z_margin_um: float = bounded(
+        6.0, 0.0, 500.0, "planes the model keeps beyond the objects' depth in the tv solution, µm"
+    )
+    roi_um: list[float] | None = Field(
+        None, description="region the model covers, [x_min, x_max, y_min, y_max] µm; empty: around the objects"
+    )
+    tv_weight: float = bounded(0.0, 0.0, 1e3, "total-variation weight, relative to the views' noise; 0: none")
+
+    @model_validator(mode="after")
+    def _roi(self) -> MultisliceSettings:
+        r = self.roi_um
+        if r is not None and (len(r) != 4 or not (r[0] < r[1] and r[2] < r[3])):
+            raise ValueError(f"roi_um must be [x_min, x_max, y_min, y_max] with min < max, got {r}")
+        return self
+
+
 #: Keys of files written before the method sections: flat key -> (section, key).
 _FLAT_KEYS = {
     "rl_iterations": ("rl", "iterations"),
@@ -141,6 +192,9 @@ class ReconstructionSettings(SettingsModel):
     tv: TvSettings = Field(default_factory=TvSettings, description="the 'tv' method")
     wotf: WotfSettings = Field(default_factory=WotfSettings, description="the 'wotf' method")
     rl: RlSettings = Field(default_factory=RlSettings, description="the 'rl' method and the directional stacks")
+    multislice: MultisliceSettings = Field(
+        default_factory=MultisliceSettings, description="the 'multislice' method (strong objects)"
+    )
 
     @model_validator(mode="before")
     @classmethod
@@ -149,13 +203,13 @@ class ReconstructionSettings(SettingsModel):
         if not isinstance(data, dict) or not (set(data) & {*_FLAT_KEYS, "tikhonov_alpha"}):
             return data
         data = dict(data)
-        sections: dict[str, dict] = {s: dict(data.get(s) or {}) for s in ("tv", "wotf", "rl")}
+        sections: dict[str, dict] = {s: dict(data.get(s) or {}) for s in PHASE_METHODS}
         for key, (section, name) in _FLAT_KEYS.items():
             if key in data:
                 sections[section].setdefault(name, data.pop(key))
         alpha = data.pop("tikhonov_alpha", None)
         if alpha is not None:  # it was the chosen method's alpha
-            sections[str(data.get("method", "tv"))].setdefault("alpha", alpha)
+            sections[alpha_section(str(data.get("method", "tv")))].setdefault("alpha", alpha)
         data.update({s: v for s, v in sections.items() if v or s in data})
         return data
 
@@ -179,15 +233,15 @@ class ReconstructionSettings(SettingsModel):
         return plane_count(self.z_min_um, self.z_max_um, self.dz_um)
 
     @property
-    def section(self) -> WotfSettings | TvSettings | RlSettings:
+    def section(self) -> WotfSettings | TvSettings | RlSettings | MultisliceSettings:
         """The chosen method's own section."""
-        section: WotfSettings | TvSettings | RlSettings = getattr(self, self.method)
+        section: WotfSettings | TvSettings | RlSettings | MultisliceSettings = getattr(self, self.method)
         return section
 
     @property
     def alpha(self) -> float:
-        """The chosen method's Tikhonov alpha."""
-        return float(self.section.alpha)
+        """The chosen method's Tikhonov alpha (the multislice method starts from the tv section's)."""
+        return float(getattr(self, alpha_section(self.method)).alpha)
 
     def operator_key(self) -> dict:
         """The settings the operators are built from (the runtime keys of every section left out).
@@ -198,7 +252,7 @@ class ReconstructionSettings(SettingsModel):
             Two settings with equal keys can share one Reconstructor.
         """
         data = {k: v for k, v in self.to_dict().items() if k not in self.runtime}
-        for name in ("tv", "wotf", "rl"):
+        for name in PHASE_METHODS:
             section = getattr(self, name)
             data[name] = {k: v for k, v in data[name].items() if k not in section.runtime}
         return data

@@ -367,7 +367,7 @@ def run_bench(
     say(f"  build {st['fast']['build_s']:.1f} s, frame {st['fast']['frame_s']:.2f} s")
 
     for name, entry in METHODS.items():  # every registered method beside the standard case's
-        if name == cfg["method"]:
+        if name == cfg["method"] or (quick and entry.slow):
             continue
         say(f"method '{name}' ({entry.summary}), no RL stacks")
         _, m_res, st[name] = fast_path(case, cal, {**cfg, "method": name}, device, stacks=False)

@@ -25,7 +25,7 @@ from napari_ssdpc.pipeline.run import Pipeline
 from napari_ssdpc.pipeline.sinks import MemorySink, ZarrSink
 from napari_ssdpc.settings.base import field_range
 from napari_ssdpc.settings.outputs import QUANTITIES
-from napari_ssdpc.settings.reconstruction import ReconstructionSettings, RlSettings
+from napari_ssdpc.settings.reconstruction import ReconstructionSettings, RlSettings, alpha_section
 
 __all__ = ["WATCH_MS", "ReconstructWidget", "result_arrays"]
 
@@ -153,7 +153,7 @@ class ReconstructWidget(StepWidget):
         rec : ReconstructionSettings
         """
         self.iterations.value = rec.rl.iterations
-        default = type(rec.section)().alpha
+        default = getattr(ReconstructionSettings(), alpha_section(rec.method)).alpha
         self.alpha.value = 0.0 if rec.alpha == default else rec.alpha
 
     def settings_changes(self) -> dict:

@@ -19,7 +19,7 @@ from napari_ssdpc.pipeline.job import Job
 from napari_ssdpc.settings.config import RunConfig
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.settings.outputs import OutputSettings
-from napari_ssdpc.settings.reconstruction import ReconstructionSettings
+from napari_ssdpc.settings.reconstruction import ReconstructionSettings, alpha_section
 
 __all__ = [
     "Session",
@@ -97,7 +97,8 @@ class Session:
                 else:
                     data[key] = value
         if star:
-            data[data["method"]] = {**data[data["method"]], **star}
+            section = alpha_section(data["method"])
+            data[section] = {**data[section], **star}
         return ReconstructionSettings.from_dict(data, source="the dock's settings")
 
     def run_config(self, save=()) -> RunConfig:

@@ -38,11 +38,14 @@ class MethodEntry:
         Its :class:`~.base.PhaseMethod` subclass.
     summary : str
         One line for the CLI help, the napari list and the docs table.
+    slow : bool
+        Minutes a frame rather than seconds: ``ssdpc bench --quick`` leaves it out.
     """
 
     module: str
     cls: str
     summary: str
+    slow: bool = False
 
 
 _HERE = __name__
@@ -58,6 +61,12 @@ METHODS: dict[str, MethodEntry] = {
         f"{_HERE}.rl",
         "RlMethod",
         "the paper's route: Richardson-Lucy stacks per half, DPC, Tikhonov phase per slice (Eq. 7)",
+    ),
+    "multislice": MethodEntry(
+        f"{_HERE}.multislice",
+        "MultisliceMethod",
+        "tv refined with a multislice model of the views (refraction, multiple scattering): strong objects",
+        slow=True,
     ),
 }
 

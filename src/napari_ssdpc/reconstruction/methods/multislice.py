@@ -1,0 +1,249 @@
+"""The 'multislice' method: the 'tv' solution refined with a multislice model of the views.
+
+The first-order model (paper Eqs. 2-4) that 'tv' inverts holds for weak objects only; a bead of a
+few radians through its centre refracts and scatters light several times, and its first-order
+inverse loses mass and trails along z. Here the 'tv' solution is the start of a nonlinear fit: the
+views predicted by a multislice (beam propagation) model of the instrument
+(:class:`~napari_ssdpc.physics.views_multislice.ViewsMultislice`: Köhler source points, phase
+screens and angular-spectrum propagation through the Δn volume, the objective pupil and every
+lenslet's sub-aperture, flat-fielded) are fitted to the measured views,
+
+    minimise  ½ Σ_k ‖W (I_k(Δn) / I0_k − m_k)‖² + μ TV_ε(Δn)   subject to  Δn ∈ C
+
+with C the sign, the bound and the field stop of 'tv', by accelerated projected gradient (FISTA
+with backtracking and a restart when the misfit rises: Beck and Teboulle, SIAM J. Imaging Sci.
+2009; O'Donoghue and Candès 2015), the gradient by the model's adjoint, as in multislice / beam
+propagation tomography (Kamilov et al., IEEE TCI 2016; Chowdhury et al., Optica 2019). The model
+covers a square region around the objects of the 'tv' solution (their footprint plus a margin for
+the light they scatter) and the planes that hold them (plus a margin): the first-order tails along
+z, which no object explains, are left out; outside the region the 'tv' solution is kept.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.physics.views_multislice import ViewsMultislice, square_roi
+from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
+from napari_ssdpc.reconstruction.methods.tv import TvMethod
+from napari_ssdpc.reconstruction.regularised import bounds
+
+__all__ = ["MultisliceMethod", "objects_roi"]
+
+#: A voxel belongs to an object of the 'tv' solution when its |Δn| projected over z reaches this
+#: fraction of the strongest.
+OBJECT_LEVEL = 0.15
+#: A plane holds an object when its strongest |Δn| in the region reaches this fraction of the
+#: strongest plane's: the first-order tails along z (about a tenth of the object) stay out.
+PLANE_LEVEL = 0.3
+#: Stop when the relative change of Δn falls below this.
+TOLERANCE = 1e-3
+
+
+def objects_roi(dn, x_um, y_um, margin_um: float, level: float = OBJECT_LEVEL):
+    """The square region of the views' grid around the objects of a Δn volume, plus a margin.
+
+    Parameters
+    ----------
+    dn : ndarray, (Z, ny, nx)
+        Δn on the views' grid.
+    x_um, y_um : ndarray, (nx,), (ny,)
+        The grid, µm.
+    margin_um : float
+        Added on every side, µm (the light an object scatters must stay inside).
+    level : float
+        Fraction of the strongest projected |Δn| that marks an object.
+
+    Returns
+    -------
+    rows, cols : slice
+    """
+    proj = np.abs(dn).sum(axis=0)
+    on = proj >= level * proj.max() if proj.max() > 0 else np.ones(proj.shape, bool)
+    iy, ix = np.nonzero(on)
+    x0, x1, y0, y1 = x_um[ix.min()], x_um[ix.max()], y_um[iy.min()], y_um[iy.max()]
+    side = max(x1 - x0, y1 - y0) + 2 * margin_um
+    return square_roi(x_um, y_um, ((x0 + x1) / 2, (y0 + y1) / 2), side)
+
+
+def object_planes(dn, margin_planes: int, level: float = PLANE_LEVEL) -> slice:
+    """The planes that hold the objects of a Δn volume (a region of it), plus a margin.
+
+    Parameters
+    ----------
+    dn : ndarray, (Z, ny, nx)
+    margin_planes : int
+        Planes added on each side.
+    level : float
+        Fraction of the strongest plane's largest |Δn| that marks a plane with an object.
+
+    Returns
+    -------
+    slice
+    """
+    prof = np.abs(dn).max(axis=(1, 2))
+    on = np.flatnonzero(prof >= level * prof.max()) if prof.max() > 0 else np.arange(len(prof))
+    return slice(max(int(on.min()) - margin_planes, 0), min(int(on.max()) + 1 + margin_planes, len(prof)))
+
+
+def _roi_of(box_um, x_um, y_um):
+    x0, x1, y0, y1 = box_um
+    if x1 < x_um[0] or x0 > x_um[-1] or y1 < y_um[0] or y0 > y_um[-1]:
+        raise SsdpcError(
+            f"the region {x0:g}..{x1:g} x {y0:g}..{y1:g} µm lies outside the field of view "
+            f"({x_um[0]:.1f}..{x_um[-1]:.1f} x {y_um[0]:.1f}..{y_um[-1]:.1f} µm); give a region inside it (--roi)"
+        )
+    return square_roi(x_um, y_um, ((x0 + x1) / 2, (y0 + y1) / 2), max(x1 - x0, y1 - y0))
+
+
+def _tv_smooth(x, voxel, eps):
+    """TV_ε = Σ sqrt(|Dx|² + ε²) and its gradient Σ_a D_aᵀ (D_a x / sqrt(...)), same shape as x.
+
+    D_a: forward differences per µm along axis a, 0 at the last index (no wrap-around).
+    """
+    diffs = [np.diff(x, axis=a, append=np.take(x, [-1], axis=a)) / h for a, h in enumerate(voxel)]
+    norm = np.sqrt(sum(d * d for d in diffs) + eps * eps)
+    out = np.zeros_like(x)
+    for a, (d, h) in enumerate(zip(diffs, voxel)):
+        q = np.moveaxis(d / norm, a, 0)
+        o = np.moveaxis(out, a, 0)  # a view: D_aᵀ q = (q_{i-1} − q_i) / h
+        o -= q / h
+        o[1:] += q[:-1] / h
+    return float(norm.sum()), out
+
+
+def _sign_of(report: dict, sign: str) -> str:
+    """The sign the 'tv' start used ('auto' resolved: its report says 'auto: lighter (...)')."""
+    chosen = str(report.get("tv_sign", sign))
+    return chosen.split(":")[1].split()[0] if chosen.startswith("auto:") else chosen
+
+
+class MultisliceMethod(PhaseMethod):
+    """'tv', then a nonlinear fit of a multislice model of the views in a region around the objects."""
+
+    name = "multislice"
+
+    def __init__(self, setup: Setup, tv: TvMethod):
+        self.setup, self.tv = setup, tv
+
+    @classmethod
+    def _build(cls, setup, progress):
+        return cls(setup, TvMethod.build(setup, progress))  # the model itself is built per frame
+
+    def _solve(self, views, stacks, warm, progress, should_stop):
+        s, v = self.setup, self.setup.views
+        ms = s.settings.multislice
+        start = self.tv.solve(views, warm=warm, progress=progress, should_stop=should_stop)
+        lam, dz = s.optics.wavelength_um, s.dz_um
+        to_dn = lam / (2 * math.pi * dz)  # Δn = λφ/(2π dz)
+        dn = np.asarray(start.phase, np.float64) * to_dn
+        if ms.roi_um is not None:
+            rows, cols = _roi_of(ms.roi_um, v.x_um, v.y_um)
+        else:
+            rows, cols = objects_roi(dn, v.x_um, v.y_um, ms.roi_margin_um)
+        planes = object_planes(dn[:, rows, cols], int(math.ceil(ms.z_margin_um / dz)))
+        t0 = time.perf_counter()
+        model = ViewsMultislice(
+            s.optics,
+            v.lenslets,
+            v.x_um,
+            v.y_um,
+            s.z_um[planes],
+            roi=(rows, cols),
+            refine=ms.refine,
+            substeps=ms.substeps,
+            dz_um=dz,
+            source_spacing_na=ms.source_spacing_na,
+        )
+        measured = model.crop(views).astype(np.float64)
+        weight = model.crop(np.asarray(v.view_mask, np.float64))
+        lo, hi = bounds(_sign_of(start.report, s.settings.tv.sign), s.settings.tv.dn_max)  # in Δn
+        inside = np.asarray(v.mask[rows, cols], bool)[None]
+        noise = float(start.report.get("tv_noise", float("nan")))
+        mu = ms.tv_weight * (noise if math.isfinite(noise) else 0.0)
+        voxel = (dz, float(v.x_um[1] - v.x_um[0]), float(v.x_um[1] - v.x_um[0]))
+
+        k = ms.refine  # the unknowns stay on the views' grid; the model samples each pixel k x k
+
+        def fine(x):
+            return np.repeat(np.repeat(x, k, axis=1), k, axis=2)
+
+        def coarse_sum(g):
+            z, ny, nx = g.shape
+            return g.reshape(z, ny // k, k, nx // k, k).sum(axis=(2, 4))
+
+        def project(x):
+            return np.clip(x, lo, hi) * inside
+
+        def objective(x, with_grad=True):
+            if with_grad:
+                f, g = model.misfit(fine(x), measured, weight)
+                g = coarse_sum(np.asarray(g, np.float64))
+            else:
+                r = (np.asarray(model.views(fine(x)), np.float64) - measured) * np.sqrt(weight)
+                f, g = 0.5 * float(np.sum(r * r)), None
+            if mu > 0:
+                t, gt = _tv_smooth(x, voxel, 1e-4)
+                f += mu * t
+                g = None if g is None else g + mu * gt
+            return f, g
+
+        x = project(dn[planes, rows, cols])
+        f, g = objective(x)
+        history = {"objective": [f], "relative_change": []}
+        step = 0.1 * max(float(np.abs(x).max()), 1e-3) / max(float(np.abs(g).max()), 1e-30)
+        y, fy, gy, t_k, converged = x, f, g, 1.0, False
+        for it in range(ms.iterations):
+            if should_stop is not None and should_stop():
+                break
+            while True:  # backtracking on the quadratic upper bound at y
+                x_new = project(y - step * gy)
+                d = x_new - y
+                f_new, _ = objective(x_new, with_grad=False)
+                if f_new <= fy + float(np.sum(gy * d)) + float(np.sum(d * d)) / (2 * step) or step < 1e-30:
+                    break
+                step *= 0.5
+            change = float(np.linalg.norm(x_new - x)) / max(float(np.linalg.norm(x_new)), 1e-30)
+            if f_new > f:  # the misfit rose: restart the momentum from the last point
+                t_k, y = 1.0, x
+                fy, gy = objective(y)
+                history["relative_change"].append(0.0)
+                continue
+            t_next = (1 + math.sqrt(1 + 4 * t_k * t_k)) / 2
+            y = x_new + ((t_k - 1) / t_next) * (x_new - x)
+            x, f, t_k = x_new, f_new, t_next
+            fy, gy = objective(y)
+            step *= 1.5  # let the step grow back
+            history["objective"].append(f)
+            history["relative_change"].append(change)
+            if progress is not None:
+                progress(it + 1, ms.iterations, "multislice")
+            if change < TOLERANCE and it > 2:
+                converged = True
+                break
+        dn[:, rows, cols] = 0.0  # the model holds the objects: the first-order tails are gone
+        dn[planes, rows, cols] = x
+        res = (np.asarray(model.views(fine(x)), np.float64) - measured) * np.sqrt(weight)
+        n_data = max(float(weight.sum()), 1.0)
+        report = {
+            **start.report,
+            "multislice_iterations_run": len(history["relative_change"]),
+            "multislice_converged": converged,
+            "multislice_objective_start": history["objective"][0],
+            "multislice_objective_final": history["objective"][-1],
+            "multislice_residual_rms": math.sqrt(float(np.sum(res * res)) / n_data),
+            "multislice_residual_over_noise": float(np.sum(res * res)) / n_data / noise**2 if noise > 0 else None,
+            "multislice_roi_px": [rows.start, rows.stop, cols.start, cols.stop],
+            "multislice_z_um": [float(s.z_um[planes][0]), float(s.z_um[planes][-1])],
+            "multislice_source_points": model.n_sources,
+            "multislice_seconds": time.perf_counter() - t0,
+        }
+        return Solution((dn / to_dn).astype(np.float32), report, {**start.history, "multislice": history}, state=None)
+
+    def settings(self) -> dict:
+        """The Tikhonov α of the 'tv' start."""
+        return self.tv.settings()
