@@ -12,7 +12,9 @@ import numpy as np
 import pytest
 
 from napari_ssdpc.physics.design import design
+from napari_ssdpc.settings.base import field_range
 from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.settings.reconstruction import ReconstructionSettings
 
 pytest.importorskip("napari")
 pytest.importorskip("pytestqt")
@@ -200,6 +202,14 @@ def test_core_errors_are_notifications(make_napari_viewer, qtbot, bead, errors, 
     assert len(errors) == 2 and "condenser_na 0.5 >= objective NA 0.4" in errors[1]
     assert _widgets.session_for(viewer).optics.condenser_na == optics.condenser_na  # bad edit not applied
     assert w["optics"].design.value.startswith("⚠")
+
+
+def test_operators_z_boxes_take_the_settings_ranges(make_napari_viewer):
+    ow = _widgets.OperatorsWidget(make_napari_viewer())
+    rec = ReconstructionSettings()
+    for box, name in ((ow.z_min, "z_min_um"), (ow.z_max, "z_max_um"), (ow.dz, "dz_um")):
+        assert (box.min, box.max) == field_range(ReconstructionSettings, name), name
+        assert box.value == getattr(rec, name), name
 
 
 def test_optics_widget_design_numbers_are_live(make_napari_viewer, tmp_path):

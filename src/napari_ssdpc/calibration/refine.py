@@ -200,20 +200,22 @@ def fit_lattice(xy, n, sig, pitch, flip, usable, cell, whole_array=False):
     min_affine = MIN_AFFINE_LIT if whole_array else MIN_AFFINE
     w = 1.0 / np.maximum(sig, 2e-4 * pitch) ** 2
     trusted = usable.copy() if usable.sum() >= MIN_EIS else np.ones(len(xy), bool)
-    lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted], cell, min_affine)
-    res = xy - lat.centres(n)
+
+    def fit(trusted):
+        lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted], cell, min_affine)
+        return lat, xy - lat.centres(n)
+
+    lat, res = fit(trusted)
     for _ in range(3):
         rr = np.hypot(res[:, 0], res[:, 1])
         new = trusted & (rr < max(OUTLIER * pitch, 5 * 1.4826 * float(np.median(rr[trusted]))))
         if new.sum() < MIN_EIS or np.array_equal(new, trusted):
             break
         trusted = new
-        lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted], cell, min_affine)
-        res = xy - lat.centres(n)
+        lat, res = fit(trusted)
     if MIN_EIS < trusted.sum() < MIN_AFFINE and not whole_array:
         trusted = leave_one_out(xy, n, w, flip, cell, trusted, pitch)
-        lat, _ = fit_affine(xy[trusted], n[trusted], flip, w[trusted], cell, min_affine)
-        res = xy - lat.centres(n)
+        lat, res = fit(trusted)
     return lat, res, trusted
 
 

@@ -151,6 +151,31 @@ class Imager:
         f = sfft.ifft2(crops, axes=(-2, -1), workers=-1)
         self.acc += (weight * self.scale) * (f.real**2 + f.imag**2)
 
+    def sum_sources(self, idx, weights, spectrum, progress=None):
+        """Add every source point's spectrum (:meth:`add`) and return the :meth:`coefficients`.
+
+        Parameters
+        ----------
+        idx : ndarray, int, (J, 2)
+            Lattice indices (ix, iy) of the plane waves, units of du.
+        weights : ndarray, (J,)
+            The source points' weights, (cycles/µm)².
+        spectrum : callable
+            ``spectrum(j)``: the spectrum after the iris of source point j.
+        progress : callable, optional
+            ``progress(done, total)`` per source point.
+
+        Returns
+        -------
+        ndarray, complex, (K, nc, nc)
+            As :meth:`coefficients`.
+        """
+        for j in range(len(idx)):
+            self.add(spectrum(j), idx[j], weights[j])
+            if progress is not None:
+                progress(j + 1, len(idx))
+        return self.coefficients()
+
     def coefficients(self):
         """Fourier-series coefficients of each EI intensity (object frame, period = grid size).
 

@@ -59,7 +59,7 @@ class Phantom:
         float
             The phantom's own medium index, else ``medium_index`` (NaN for a phantom given as Δn).
         """
-        n = self.medium_index if self.medium_index is not None else medium_index
+        n = self._any_medium(medium_index)
         if n is None and not self.needs_medium:
             return float("nan")
         if n is None:

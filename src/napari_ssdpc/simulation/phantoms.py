@@ -266,6 +266,10 @@ class BarTarget(Phantom):
 
 
 # ---------------------------------------------------------------------------- factories
+#: Index of the immersion oil the beads sit in (§3.2).
+_OIL_INDEX = 1.518
+
+
 def pmma_bead(center_um=(0.0, 0.0, 0.0)) -> Sphere:
     """The paper's bead: 13 µm PMMA (n 1.49) in oil of index 1.518 (§3.2).
 
@@ -278,7 +282,7 @@ def pmma_bead(center_um=(0.0, 0.0, 0.0)) -> Sphere:
     -------
     Sphere
     """
-    return Sphere(tuple(center_um), 13.0, 1.49, medium_index=1.518)
+    return Sphere(tuple(center_um), 13.0, 1.49, medium_index=_OIL_INDEX)
 
 
 def weak_bead(center_um=(0.0, 0.0, 10.0)) -> Sphere:
@@ -293,7 +297,7 @@ def weak_bead(center_um=(0.0, 0.0, 10.0)) -> Sphere:
     -------
     Sphere
     """
-    return Sphere(tuple(center_um), 6.0, 1.525, medium_index=1.518)
+    return Sphere(tuple(center_um), 6.0, 1.525, medium_index=_OIL_INDEX)
 
 
 def two_beads() -> Spheres:
@@ -303,7 +307,8 @@ def two_beads() -> Spheres:
     -------
     Spheres
     """
-    return Spheres((Sphere((-20.0, 0.0, -25.0), 6.0, 1.56), Sphere((20.0, 0.0, 30.0), 6.0, 1.56)), medium_index=1.518)
+    beads = (Sphere((-20.0, 0.0, -25.0), 6.0, 1.56), Sphere((20.0, 0.0, 30.0), 6.0, 1.56))
+    return Spheres(beads, medium_index=_OIL_INDEX)
 
 
 def cell(**kw) -> Cell:

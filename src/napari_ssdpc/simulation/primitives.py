@@ -11,8 +11,67 @@ import numpy as np
 __all__ = ["Box", "Ellipsoid"]
 
 
+class _Primitive:
+    """What the primitives share: Δn from an inside test, the extent from half-widths.
+
+    A subclass has ``center_um`` (x, y, z) µm and ``dn``, and implements ``_inside``,
+    ``_half_depth`` and ``_half_widths``.
+    """
+
+    center_um: tuple[float, float, float]
+    dn: complex
+
+    def _inside(self, z, y, x):
+        raise NotImplementedError
+
+    def _half_depth(self) -> float:
+        raise NotImplementedError
+
+    def _half_widths(self) -> tuple[float, float]:
+        raise NotImplementedError
+
+    def delta_n(self, z, y, x):
+        """Δn of the primitive at points (z, y, x) µm.
+
+        Parameters
+        ----------
+        z, y, x : array_like
+            Positions, µm (broadcast together).
+
+        Returns
+        -------
+        ndarray, complex
+            Δn (imaginary part: absorption) at each point.
+        """
+        z, y, x = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (z, y, x)))
+        return np.where(self._inside(z, y, x), complex(self.dn), 0j)
+
+    def z_range(self):
+        """z extent of the primitive.
+
+        Returns
+        -------
+        (float, float)
+            z_min, z_max, µm.
+        """
+        h = self._half_depth()
+        return self.center_um[2] - h, self.center_um[2] + h
+
+    def xy_box(self):
+        """Lateral bounding box of the primitive.
+
+        Returns
+        -------
+        (float, float, float, float)
+            x_min, x_max, y_min, y_max, µm.
+        """
+        hx, hy = self._half_widths()
+        cx, cy, _ = self.center_um
+        return cx - hx, cx + hx, cy - hy, cy + hy
+
+
 @dataclass(frozen=True)
-class Ellipsoid:
+class Ellipsoid(_Primitive):
     """Ellipsoid with constant complex Δn, semi-axes (a, b, c) along x', y', z;
     x', y' are x, y rotated by ``angle_deg`` about z.
 
@@ -42,48 +101,17 @@ class Ellipsoid:
         yr = -dx * math.sin(t) + dy * math.cos(t)
         return (xr / a) ** 2 + (yr / b) ** 2
 
-    def delta_n(self, z, y, x):
-        """Δn of the primitive at points (z, y, x) µm.
-
-        Parameters
-        ----------
-        z, y, x : array_like
-            Positions, µm (broadcast together).
-
-        Returns
-        -------
-        ndarray, complex
-            Δn (imaginary part: absorption) at each point.
-        """
-        z, y, x = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (z, y, x)))
+    def _inside(self, z, y, x):
         c, cz = self.semi_axes_um[2], self.center_um[2]
-        inside = self._lateral_q(y, x) + ((z - cz) / c) ** 2 <= 1.0
-        return np.where(inside, complex(self.dn), 0j)
+        return self._lateral_q(y, x) + ((z - cz) / c) ** 2 <= 1.0
 
-    def z_range(self):
-        """z extent of the primitive.
+    def _half_depth(self):
+        return self.semi_axes_um[2]
 
-        Returns
-        -------
-        (float, float)
-            z_min, z_max, µm.
-        """
-        return self.center_um[2] - self.semi_axes_um[2], self.center_um[2] + self.semi_axes_um[2]
-
-    def xy_box(self):
-        """Lateral bounding box of the primitive.
-
-        Returns
-        -------
-        (float, float, float, float)
-            x_min, x_max, y_min, y_max, µm.
-        """
+    def _half_widths(self):
         a, b, _ = self.semi_axes_um
         t = math.radians(self.angle_deg)
-        hx = math.hypot(a * math.cos(t), b * math.sin(t))
-        hy = math.hypot(a * math.sin(t), b * math.cos(t))
-        cx, cy, _ = self.center_um
-        return cx - hx, cx + hx, cy - hy, cy + hy
+        return math.hypot(a * math.cos(t), b * math.sin(t)), math.hypot(a * math.sin(t), b * math.cos(t))
 
     def slab(self, z0, z1, y, x, pixel_um, supersample=4):
         """Pixel-averaged ∫Δn dz over [z0, z1]: exact chord in z, supersampled laterally.
@@ -126,7 +154,7 @@ class Ellipsoid:
 
 
 @dataclass(frozen=True)
-class Box:
+class Box(_Primitive):
     """Axis-aligned box with constant complex Δn (exact partial-volume voxelisation).
 
     Attributes
@@ -143,45 +171,17 @@ class Box:
     size_um: tuple[float, float, float]
     dn: complex
 
-    def delta_n(self, z, y, x):
-        """Δn of the primitive at points (z, y, x) µm.
-
-        Parameters
-        ----------
-        z, y, x : array_like
-            Positions, µm (broadcast together).
-
-        Returns
-        -------
-        ndarray, complex
-            Δn (imaginary part: absorption) at each point.
-        """
-        z, y, x = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (z, y, x)))
+    def _inside(self, z, y, x):
         inside = np.ones(z.shape, dtype=bool)
         for v, c, s in zip((x, y, z), self.center_um, self.size_um):
             inside &= np.abs(v - c) <= s / 2
-        return np.where(inside, complex(self.dn), 0j)
+        return inside
 
-    def z_range(self):
-        """z extent of the primitive.
+    def _half_depth(self):
+        return self.size_um[2] / 2
 
-        Returns
-        -------
-        (float, float)
-            z_min, z_max, µm.
-        """
-        return self.center_um[2] - self.size_um[2] / 2, self.center_um[2] + self.size_um[2] / 2
-
-    def xy_box(self):
-        """Lateral bounding box of the primitive.
-
-        Returns
-        -------
-        (float, float, float, float)
-            x_min, x_max, y_min, y_max, µm.
-        """
-        (cx, cy, _), (sx, sy, _) = self.center_um, self.size_um
-        return cx - sx / 2, cx + sx / 2, cy - sy / 2, cy + sy / 2
+    def _half_widths(self):
+        return self.size_um[0] / 2, self.size_um[1] / 2
 
     def slab(self, z0, z1, y, x, pixel_um, supersample=4):
         """Pixel-averaged ∫Δn dz over [z0, z1].

@@ -149,11 +149,8 @@ def flat_intensity(
     sampling = Sampling.for_optics(optics)
     imager = Imager(optics, sampling, lenslets)
     idx, _, wgt = (source or Source()).points(optics, sampling)
-    for j in range(len(idx)):
-        imager.add(imager.empty_spectrum(idx[j]), idx[j], wgt[j])
-        if progress is not None:
-            progress(j + 1, len(idx))
-    return render(imager.coefficients(), centres, optics, sampling, grid, camera)
+    coeffs = imager.sum_sources(idx, wgt, lambda j: imager.empty_spectrum(idx[j]), progress)
+    return render(coeffs, centres, optics, sampling, grid, camera)
 
 
 def flat_frame(

@@ -132,16 +132,15 @@ def simulate(
     imager = Imager(optics, sampling, lenslets)
     idx, w, wgt = source.points(optics, sampling)
     slabs = Slabs(phantom, optics, sampling, dz_um) if phantom is not None else None
-    for j in range(len(idx)):
+
+    def spectrum(j):
         if slabs is None:
-            spec = imager.empty_spectrum(idx[j])
-        else:
-            v = slabs.embed(slabs.exit_envelope(w[j]), sampling.n)
-            spec = imager.image_spectrum(v, idx[j], slabs.z_exit)
-        imager.add(spec, idx[j], wgt[j])
-        if progress is not None:
-            progress(j + 1, len(idx))
-    intensity = render(imager.coefficients(), centres, optics, sampling, grid, camera)
+            return imager.empty_spectrum(idx[j])
+        v = slabs.embed(slabs.exit_envelope(w[j]), sampling.n)
+        return imager.image_spectrum(v, idx[j], slabs.z_exit)
+
+    coeffs = imager.sum_sources(idx, wgt, spectrum, progress)
+    intensity = render(coeffs, centres, optics, sampling, grid, camera)
     frame = camera.apply(intensity, camera.rng(rng))
     info = {
         "subgrid": slabs.ns if slabs else 0,

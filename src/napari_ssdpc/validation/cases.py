@@ -94,9 +94,7 @@ def simulate_case(
     -------
     Case
     """
-    first = phantom[0] if isinstance(phantom, list) else phantom
-    if first is not None and first.medium_index is not None:
-        optics = optics.replace(medium_index=float(first.medium_index))
+    optics = ph.optics_for(phantom, optics)
     grid = Grid.nominal(optics, axis_offset_px=axis_offset_px, rotation_deg=rotation_deg)
     step = "" if source_step == 2 else f"_step{source_step}"
     path = None if cache_dir is None else Path(cache_dir) / f"{name}_na{optics.condenser_na:g}_s{seed}{step}.npz"

@@ -36,13 +36,13 @@ def bead_figure(result, sphere, medium_index, path, title=""):
     str or Path
         ``path``.
     """
-    from napari_ssdpc.validation.cases import truth_volume
+    from napari_ssdpc.validation.cases import _index, truth_volume
 
     plt = _plt()
     ri = result.ri
     truth = medium_index + truth_volume(sphere, result, medium_index)
     x, y, z = sphere.center_um
-    iz, iy, ix = (int(np.argmin(abs(c - v))) for c, v in ((result.z_um, z), (result.y_um, y), (result.x_um, x)))
+    iz, iy, ix = _index(result, (z, y, x))
     lim = max(float(np.abs(ri - medium_index).max()), 1e-6)
     kw = dict(cmap="RdBu_r", vmin=medium_index - lim, vmax=medium_index + lim)
     tv = result.convergence.get("tv") if isinstance(result.convergence, dict) else None

@@ -29,6 +29,12 @@ from napari_ssdpc.settings.reconstruction import (
 __all__ = ["OperatorsWidget"]
 
 
+def _spin_box(rec: ReconstructionSettings, name: str, label: str, step: float, tooltip: str) -> FloatSpinBox:
+    """A spin box over a field of the reconstruction settings: its range, its value in ``rec``."""
+    lo, hi = field_range(ReconstructionSettings, name)
+    return FloatSpinBox(label=label, min=lo, max=hi, step=step, value=getattr(rec, name), tooltip=tooltip)
+
+
 class OperatorsWidget(StepWidget):
     """z range, dz and model; builds the PSFs and transfer functions once (a Reconstructor)."""
 
@@ -40,29 +46,12 @@ class OperatorsWidget(StepWidget):
             choices=calibration_layer_choices(napari_viewer),
             tooltip="EI-circles layer made by Calibrate or opened from a calibration JSON",
         )
-        self.z_min = FloatSpinBox(
-            label="z min (µm)",
-            min=-5000,
-            max=5000,
-            step=1,
-            value=rec.z_min_um,
-            tooltip="first plane, µm from the focal plane (z > 0: farther from the objective)",
+        self.z_min = _spin_box(
+            rec, "z_min_um", "z min (µm)", 1, "first plane, µm from the focal plane (z > 0: farther from the objective)"
         )
-        self.z_max = FloatSpinBox(
-            label="z max (µm)",
-            min=-5000,
-            max=5000,
-            step=1,
-            value=rec.z_max_um,
-            tooltip="last plane, µm from the focal plane",
-        )
-        self.dz = FloatSpinBox(
-            label="dz (µm)",
-            min=0.05,
-            max=100,
-            step=0.05,
-            value=rec.dz_um,
-            tooltip="plane spacing, µm (the paper's axial resolution is about 21 µm)",
+        self.z_max = _spin_box(rec, "z_max_um", "z max (µm)", 1, "last plane, µm from the focal plane")
+        self.dz = _spin_box(
+            rec, "dz_um", "dz (µm)", 0.05, "plane spacing, µm (the paper's axial resolution is about 21 µm)"
         )
         self.model = ComboBox(
             label="transfer model",
