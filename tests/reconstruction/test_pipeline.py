@@ -193,7 +193,7 @@ def test_multislice_refines_the_tv_solution_of_a_weak_bead(case, calibration, re
     x, y = res.x_um[(c0 + c1) // 2], res.y_um[(r0 + r1) // 2]
     assert abs(x - 4.0) < 8.0 and abs(y + 3.0) < 8.0  # around the bead at (4, -3) µm
     iy, ix = int(np.argmin(abs(res.y_um + 3.0))), int(np.argmin(abs(res.x_um - 4.0)))
-    opd = lambda r: r.delta_n[:, iy, ix].sum() * r.voxel_um[0]  # noqa: E731
+    opd = lambda r: r.delta_n[:, iy, ix].sum() * r.voxel_um[0]
     assert opd(res) == pytest.approx(opd(result), rel=0.25) and opd(res) == pytest.approx(0.06, rel=0.3)
     with pytest.raises(SsdpcError, match="outside the field of view"):
         roi = run_config(case.optics, z=(-30, 30), dz=2, method="multislice", multislice={"roi_um": [500, 520, 0, 20]})
