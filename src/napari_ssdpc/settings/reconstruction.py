@@ -136,10 +136,11 @@ class MultisliceSettings(SettingsModel):
 
     #: Keys read at every solve (the model is built per frame, around its objects).
     runtime: ClassVar[frozenset[str]] = frozenset(
-        {"iterations", "source_spacing_na", "substeps", "refine", "roi_margin_um", "z_margin_um", "roi_um", "tv_weight"}
+        {"iterations", "source_spacing_na", "substeps", "refine", "roi_margin_um", "z_margin_um", "roi_um"}
+        | {"tv_weight", "stop_residual_over_noise"}
     )
 
-    iterations: int = bounded(20, 1, 500, "most gradient iterations of the refinement")
+    iterations: int = bounded(60, 1, 500, "most gradient iterations of the refinement")
     source_spacing_na: float = bounded(
         0.03, 0.005, 0.5, "spacing of the model's source points over the condenser disk, NA units"
     )
@@ -155,6 +156,9 @@ class MultisliceSettings(SettingsModel):
         None, description="region the model covers, [x_min, x_max, y_min, y_max] µm; empty: around the objects"
     )
     tv_weight: float = bounded(0.0, 0.0, 1e3, "total-variation weight, relative to the views' noise; 0: none")
+    stop_residual_over_noise: float = bounded(
+        4.0, 0.0, 1e6, "stop when the mean squared residual falls to this many times the noise variance"
+    )
 
     @model_validator(mode="after")
     def _roi(self) -> MultisliceSettings:

@@ -194,11 +194,17 @@ class MultisliceMethod(PhaseMethod):
 
         x = project(dn[planes, rows, cols])
         f, g = objective(x)
+        n_data = max(float(weight.sum()), 1.0)
+        # the discrepancy principle: a fit closer than the noise (and the model's own error) fits noise
+        enough = 0.5 * n_data * noise**2 * ms.stop_residual_over_noise if noise > 0 else 0.0
         history = {"objective": [f], "relative_change": []}
         step = 0.1 * max(float(np.abs(x).max()), 1e-3) / max(float(np.abs(g).max()), 1e-30)
         y, fy, gy, t_k, converged = x, f, g, 1.0, False
         for it in range(ms.iterations):
             if should_stop is not None and should_stop():
+                break
+            if f <= enough:
+                converged = True
                 break
             while True:  # backtracking on the quadratic upper bound at y
                 x_new = project(y - step * gy)
@@ -228,7 +234,6 @@ class MultisliceMethod(PhaseMethod):
         dn[:, rows, cols] = 0.0  # the model holds the objects: the first-order tails are gone
         dn[planes, rows, cols] = x
         res = (np.asarray(model.views(fine(x)), np.float64) - measured) * np.sqrt(weight)
-        n_data = max(float(weight.sum()), 1.0)
         report = {
             **start.report,
             "multislice_iterations_run": len(history["relative_change"]),
