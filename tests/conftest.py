@@ -49,14 +49,39 @@ def _display() -> bool:
     )
 
 
+def _qt_can_open_windows() -> str:
+    """'' where a Qt application starts on this display, else why not (tried in a child process:
+    Qt aborts the process when its platform plugin cannot load, e.g. without the xcb libraries)."""
+    import subprocess
+    import sys
+
+    code = "from qtpy.QtWidgets import QApplication; QApplication([])"
+    try:
+        run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired) as e:
+        return f"Qt did not start ({type(e).__name__})"
+    if run.returncode == 0:
+        return ""
+    last = (run.stderr.strip().splitlines() or ["no message"])[-1]
+    return (
+        f"Qt cannot open a window here ({last[:120]}); install its libraries, e.g. apt install libxcb-icccm4 "
+        "libxcb-image0 libxcb-keysyms1 libxcb-randr0 libxcb-render-util0 libxcb-xinerama0 libxkbcommon-x11-0"
+    )
+
+
 def pytest_collection_modifyitems(config, items):
-    """Skip the napari GUI tests, with the reason, where no display can be made (Qt would abort)."""
-    if _display():
+    """Skip the napari GUI tests, with the reason, where no display can be made or Qt cannot start
+    on it (Qt would abort the whole run)."""
+    gui = [item for item in items if _GUI_FIXTURES & set(getattr(item, "fixturenames", ()))]
+    if not gui:
         return
-    skip = pytest.mark.skip(reason="no display for the napari GUI tests: install Xvfb (apt install xvfb) to run them")
-    for item in items:
-        if _GUI_FIXTURES & set(getattr(item, "fixturenames", ())):
-            item.add_marker(skip)
+    why = "" if not _display() else _qt_can_open_windows()
+    if _display() and not why:
+        return
+    reason = why or "no display for the napari GUI tests: install Xvfb (apt install xvfb) to run them"
+    skip = pytest.mark.skip(reason=reason)
+    for item in gui:
+        item.add_marker(skip)
 
 
 @pytest.fixture(autouse=True, scope="session")
