@@ -14,7 +14,7 @@ import tifffile
 from napari_ssdpc.cli.main import main
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.frame_source import PagedSeries, StoredFrames
-from napari_ssdpc.io.frames import read_ome_zarr
+from napari_ssdpc.io.ome_zarr import read_ome_zarr
 from napari_ssdpc.io.store import done_frames
 from napari_ssdpc.pipeline.job import Job
 from napari_ssdpc.pipeline.run import Pipeline

@@ -16,7 +16,7 @@ import zarr.storage._local as zlocal
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.frame_source import StoredFrames
-from napari_ssdpc.io.frames import read_ome_zarr
+from napari_ssdpc.io.ome_zarr import read_ome_zarr
 from napari_ssdpc.io.store import StoreLock, done_frames, read_complete
 from napari_ssdpc.pipeline.job import Job
 from napari_ssdpc.pipeline.run import Pipeline
@@ -254,7 +254,7 @@ def test_a_store_is_an_ngff_image_at_its_root_with_units_scale_and_translation(t
     with µm units, its voxel size and the position of its first voxel; each quantity keeps its group."""
     import zarr
 
-    from napari_ssdpc.io.frames import create_ome_zarr
+    from napari_ssdpc.io.ome_zarr import create_ome_zarr
 
     out = tmp_path / "s.zarr"
     create_ome_zarr(out, "ri", (3, 5, 8, 9), "TZYX", (2.0, 0.5, 0.5), origin_um=(-4.0, -1.75, -2.0))

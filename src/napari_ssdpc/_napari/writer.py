@@ -111,7 +111,7 @@ def _jsonable(obj):
 
 def write_ome_zarr(path, data, *, name: str, voxel_um, origin_um=(0.0, 0.0, 0.0), attrs: dict | None = None) -> Path:
     """Image group ``name`` (e.g. 'ri') of the OME-Zarr store ``path``, in the layout of
-    ``core.io.create_ome_zarr`` that ``ssdpc reconstruct`` writes: OME-NGFF 0.4, zarr format 2,
+    ``io.ome_zarr.create_ome_zarr`` that ``ssdpc reconstruct`` writes: OME-NGFF 0.4, zarr format 2,
     one chunk per time point, scale and translation in µm. Other image groups in the store are
     kept. The group is written into a temporary store next to ``path`` and moved into place.
 
@@ -130,7 +130,7 @@ def write_ome_zarr(path, data, *, name: str, voxel_um, origin_um=(0.0, 0.0, 0.0)
     """
     import zarr
 
-    from napari_ssdpc.io.frames import create_ome_zarr, link_root_image
+    from napari_ssdpc.io.ome_zarr import create_ome_zarr, link_root_image
 
     path = Path(path)
     if not path.parent.exists():

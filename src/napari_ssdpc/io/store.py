@@ -127,7 +127,7 @@ def _create(out: Path, n_frames, layout, voxel, stamp: dict, attrs: dict, origin
     """Build the complete empty store in a hidden folder and rename it into place."""
     import zarr
 
-    from napari_ssdpc.io.frames import create_ome_zarr
+    from napari_ssdpc.io.ome_zarr import create_ome_zarr
 
     for old in out.parent.glob(f".{glob_escape(out.name)}.*.new"):  # left by a killed creation
         pid = old.name[len(out.name) + 2 : -len(".new")]
@@ -186,7 +186,7 @@ def open_store(out, n_frames: int, layout: dict, voxel, stamp: dict, attrs: dict
     """
     import zarr
 
-    from napari_ssdpc.io.frames import create_ome_zarr
+    from napari_ssdpc.io.ome_zarr import create_ome_zarr
 
     out = Path(out)
     if out.exists() and not out.is_dir():
@@ -283,7 +283,7 @@ def read_complete(out, name: str = "ri") -> np.ndarray:
     numpy.ndarray
         (t, ...) float32.
     """
-    from napari_ssdpc.io.frames import read_ome_zarr
+    from napari_ssdpc.io.ome_zarr import read_ome_zarr
 
     arr, _, _ = read_ome_zarr(out, name)
     return np.asarray(mask_incomplete(np.array(arr[:], dtype=np.float32), out))

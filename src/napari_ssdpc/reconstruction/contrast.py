@@ -21,27 +21,7 @@ from napari_ssdpc.reconstruction import checks
 from napari_ssdpc.settings.lenslets import HALVES
 from napari_ssdpc.settings.optics import Optics
 
-__all__ = ["ViewContrast", "estimate_dark"]
-
-
-def estimate_dark(frame, calibration: Calibration) -> float:
-    """Dark offset: median of the pixels farther than 1.2 EI radii from every lenslet centre.
-
-    Parameters
-    ----------
-    frame : ndarray, (H, W)
-        Camera units.
-    calibration : Calibration
-
-    Returns
-    -------
-    float
-        Camera units.
-    """
-    dark = checks.dark_pixels(np.asarray(frame, np.float32), calibration)
-    if dark.size < 100:
-        raise SsdpcError("no dark pixels outside the elemental images to estimate the dark offset; pass dark=VALUE")
-    return float(np.median(dark))
+__all__ = ["ViewContrast"]
 
 
 def _noise(dark) -> float:
