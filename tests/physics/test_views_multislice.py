@@ -60,15 +60,21 @@ def test_without_sample_or_with_a_uniform_slab_every_view_is_one(optics):
 
 
 def test_direct_light_is_the_overlap_of_source_disk_and_sub_aperture(optics):
-    """I0_k ∝ area of the source disk inside A_k: exact for lenslets wholly inside the pupil."""
+    """I0_k ∝ area of the source disk inside A_k: exact for lenslets wholly inside the pupil, even
+    with source points 0.03 NA apart (2 across a sub-aperture's radius), once the points are weighted
+    per lenslet and sub-sampled at the apertures (docs/nonlinear.md)."""
     x = _grid(optics, 32)
     inside = [ln for ln in _lit(optics, 32) if ln.fraction == 1.0]
-    model = ViewsMultislice(optics, inside, x, x, [0.0], dz_um=1.0, source_spacing_na=0.005)
     rho, r_s = optics.subaperture_radius, optics.source_radius
     area = circle_overlap_fraction(np.hypot(*np.array([ln.u for ln in inside]).T), rho, r_s)
     assert area.min() < 0.8  # straddling lenslets are among them
-    # a hard aperture edge across the lattice of source points: ~2 % at 0.005 NA (docs/nonlinear.md)
-    np.testing.assert_allclose(model.i0 / model.i0.max(), area / area.max(), rtol=0.03)
+
+    def worst(**kw):
+        model = ViewsMultislice(optics, inside, x, x, [0.0], dz_um=1.0, source_spacing_na=0.03, **kw)
+        return np.abs(model.i0 / model.i0.max() / (area / area.max()) - 1).max()
+
+    assert worst() < 0.01  # measured 0.005
+    assert worst(source_subsamples=1, edge_weights=False) > 0.05  # each point its own cell: 0.10
 
 
 def test_inputs_are_checked(optics):
@@ -126,13 +132,13 @@ def test_weak_object_limit_is_the_first_order_model(optics):
     x = _grid(optics, n)
     lenslets = _lit(optics, n)
     z = 6.0 + dz * np.arange(-3, 4)
-    model = ViewsMultislice(optics, lenslets, x, x, z, source_spacing_na=0.01, pixel_integration=False)
+    model = ViewsMultislice(optics, lenslets, x, x, z, source_spacing_na=0.03, pixel_integration=False)
     bead = Sphere((1.0, -2.0, 6.0), 6.0, 1.518 + 5e-4, medium_index=1.518)
     dn = bead.volume(z, model.y_um, model.x_um).real
     contrast = model.views(dn) - 1
     linear = _first_order(optics, lenslets, n, z, dz, dn)
     assert np.sqrt(np.mean(linear**2)) > 1e-3
-    assert _rel(contrast, linear) < 0.1
+    assert _rel(contrast, linear) < 0.1  # measured 0.06 (0.04 at 0.02 NA)
     # the same bead in front of the focal plane looks different: the depth is seen
     mirrored = _first_order(optics, lenslets, n, -z[::-1], dz, dn[::-1])
     assert _rel(contrast, mirrored) > 0.5
@@ -176,7 +182,7 @@ def test_views_match_the_simulator(optics, phantom, dz, refine, ms_max, fo_min):
     nz = int(math.ceil(2 * r / dz)) + 1
     z = phantom.center_um[2] + dz * (np.arange(nz) - (nz - 1) / 2)
     roi = square_roi(x, y, phantom.center_um[:2], 2 * r + 20.0)
-    model = ViewsMultislice(optics, contrast.lenslets, x, y, z, roi=roi, refine=refine, source_spacing_na=0.01)
+    model = ViewsMultislice(optics, contrast.lenslets, x, y, z, roi=roi, refine=refine, source_spacing_na=0.03)
     dn = phantom.volume(z, model.y_um, model.x_um, optics.medium_index).real
     data, mask = model.crop(views), model.crop(contrast.view_mask)
     signal = np.where(mask, data - 1, 0)
@@ -190,6 +196,7 @@ def test_views_match_the_simulator(optics, phantom, dz, refine, ms_max, fo_min):
     band = vm.take(vm.bk.rfft2((2 * math.pi / optics.wavelength_um * phi).astype(np.float32), norm="ortho"))
     linear = model.crop(vm.images(vm.forward(band)) / vm.w[:, None, None])
     err_fo = _rel(np.where(mask, linear, 0), signal)
+    print(f"relative error of the views: multislice {err_ms:.3f}, first order {err_fo:.3f}")
     assert err_ms < ms_max
     assert err_fo > fo_min
     assert err_ms < 0.3 * err_fo

@@ -22,6 +22,7 @@ import math
 
 import numpy as np
 import scipy.fft as sfft
+from scipy.spatial import cKDTree
 
 from napari_ssdpc.physics.pupil import eta
 
@@ -261,6 +262,67 @@ def in_subaperture(ux, uy, u_k, rho: float, cutoff: float) -> np.ndarray:
         The broadcast shape of ``ux`` and ``uy``.
     """
     return ((ux - u_k[0]) ** 2 + (uy - u_k[1]) ** 2 <= rho * rho) & (ux * ux + uy * uy <= cutoff * cutoff)
+
+
+def lenslet_source_weights(
+    w, spacing: float, radius: float, u_centres, rho: float, cutoff: float, supersample=8, max_samples=250_000
+):
+    """Per-lenslet weights of lattice source points, so each lenslet's bright-field edge is exact.
+
+    A view's intensity jumps where a source point's direct light crosses the edge of the lenslet's
+    sub-aperture. Weighting every point by its own cell (:func:`kohler_source`) counts the cells that
+    straddle that edge wholly on the side of their centre: an error of the order of the spacing in
+    the bright-field area, which matters when a sub-aperture holds only a few points. Here the
+    condenser disk is sampled ``supersample`` times finer than the points, and every sample is
+    given to the nearest point whose direct light falls on the same side of the lenslet's edge
+    (inside or outside A_k) as the sample's: per lenslet, the points share the disk's area, and
+    the bright part of it is carried by bright points only.
+
+    Parameters
+    ----------
+    w : ndarray, (S, 2)
+        Source points (ux, uy), cycles/µm, on a square lattice of step ``spacing``.
+    spacing : float
+        Lattice step, cycles/µm.
+    radius : float
+        Condenser disk radius NA_c/λ, cycles/µm.
+    u_centres : array_like, (K, 2)
+        Sub-aperture centres u_k (x, y), cycles/µm.
+    rho : float
+        Sub-aperture radius ρ, cycles/µm.
+    cutoff : float
+        Objective cut-off NA/λ, cycles/µm.
+    supersample : int
+        Samples of the disk per lattice step.
+    max_samples : int
+        At most this many samples of the disk (fewer per step for a fine lattice).
+
+    Returns
+    -------
+    ndarray, float64, (S, K)
+        Area of the disk each point carries for each lenslet, (cycles/µm)²; every column sums to
+        the disk's area (to the sampling).
+    """
+    w = np.asarray(w, float)
+    h = max(spacing / supersample, radius * math.sqrt(math.pi / max_samples))
+    m = int(math.ceil(radius / h))
+    t = (np.arange(-m, m) + 0.5) * h
+    sx, sy = np.meshgrid(t, t)
+    keep = sx * sx + sy * sy <= radius * radius
+    v = np.stack([sx[keep], sy[keep]], axis=1)
+    out = np.zeros((len(w), len(u_centres)))
+    for k, u_k in enumerate(np.asarray(u_centres, float)):
+        bright_v = in_subaperture(v[:, 0], v[:, 1], u_k, rho, cutoff)
+        bright_w = in_subaperture(w[:, 0], w[:, 1], u_k, rho, cutoff)
+        for side in (True, False):
+            pts = np.flatnonzero(bright_w == side)
+            if not len(pts):  # no point on this side: the nearest of any side carries it
+                pts = np.arange(len(w))
+            samples = v[bright_v == side]
+            if len(samples):
+                _, nearest = cKDTree(w[pts]).query(samples)
+                out[:, k] += np.bincount(pts[nearest], minlength=len(w)) * h * h
+    return out
 
 
 def objective_pupil_cells(u2, cutoff: float, du: float) -> np.ndarray:

@@ -136,7 +136,8 @@ class MultisliceSettings(SettingsModel):
 
     #: Keys read at every solve (the model is built per frame, around its objects).
     runtime: ClassVar[frozenset[str]] = frozenset(
-        {"iterations", "source_spacing_na", "substeps", "refine", "roi_margin_um", "z_margin_um", "roi_um"}
+        {"iterations", "source_spacing_na", "source_subsamples", "substeps", "refine", "roi_margin_um", "z_margin_um"}
+        | {"roi_um"}
         | {"tv_weight", "stop_residual_over_noise"}
     )
 
@@ -144,13 +145,16 @@ class MultisliceSettings(SettingsModel):
     source_spacing_na: float = bounded(
         0.03, 0.005, 0.5, "spacing of the model's source points over the condenser disk, NA units"
     )
+    source_subsamples: int = bounded(
+        3, 1, 8, "sub-points per source point and axis at the apertures (their sharp edges sampled finer)"
+    )
     substeps: int = bounded(1, 1, 8, "multislice slabs per plane")
     refine: int = bounded(
         2, 1, 4, "model samples per view pixel along x and y (2: the light a strong object bends stays in band)"
     )
     roi_margin_um: float = bounded(12.0, 0.0, 500.0, "margin of the model's region around the objects, µm")
     z_margin_um: float = bounded(
-        6.0, 0.0, 500.0, "planes the model keeps beyond the objects' depth in the tv solution, µm"
+        6.0, 0.0, 500.0, "planes the model keeps beyond each object's own extent around its depth, µm"
     )
     roi_um: list[float] | None = Field(
         None, description="region the model covers, [x_min, x_max, y_min, y_max] µm; empty: around the objects"

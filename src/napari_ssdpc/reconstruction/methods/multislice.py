@@ -25,6 +25,7 @@ import math
 import time
 
 import numpy as np
+from scipy import ndimage
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.views_multislice import ViewsMultislice, square_roi
@@ -32,14 +33,11 @@ from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solutio
 from napari_ssdpc.reconstruction.methods.tv import TvMethod
 from napari_ssdpc.reconstruction.regularised import bounds
 
-__all__ = ["MultisliceMethod", "objects_roi"]
+__all__ = ["MultisliceMethod", "object_windows", "objects_roi"]
 
 #: A voxel belongs to an object of the 'tv' solution when its |Δn| projected over z reaches this
 #: fraction of the strongest.
 OBJECT_LEVEL = 0.15
-#: A plane holds an object when its strongest |Δn| in the region reaches this fraction of the
-#: strongest plane's: the first-order tails along z (about a tenth of the object) stay out.
-PLANE_LEVEL = 0.3
 #: Stop when the relative change of Δn falls below this.
 TOLERANCE = 1e-3
 
@@ -70,24 +68,51 @@ def objects_roi(dn, x_um, y_um, margin_um: float, level: float = OBJECT_LEVEL):
     return square_roi(x_um, y_um, ((x0 + x1) / 2, (y0 + y1) / 2), side)
 
 
-def object_planes(dn, margin_planes: int, level: float = PLANE_LEVEL) -> slice:
-    """The planes that hold the objects of a Δn volume (a region of it), plus a margin.
+def object_windows(dn, z_um, pixel_um: float, margin_um: float, level: float = OBJECT_LEVEL):
+    """Where each object of a Δn volume (a region of it) lies: its own extent around its depth.
+
+    The first-order solution of an object is longer along z than the object (the missing cone)
+    and a strong object trails a tail through the whole z range; neither is the object. The
+    objects are the connected parts of the z-projected |Δn| above ``level`` of its largest; an
+    object's depth z_c is the |Δn|-weighted mean depth of the planes of its column that hold at
+    least half of its strongest plane, and its extent is its equivalent radius r (from its
+    footprint's area) on either side: every pixel of the region (given to the nearest object)
+    keeps the planes |z − z_c| ≤ r + ``margin_um``.
 
     Parameters
     ----------
     dn : ndarray, (Z, ny, nx)
-    margin_planes : int
-        Planes added on each side.
+        Δn.
+    z_um : ndarray, (Z,)
+        Plane depths, µm.
+    pixel_um : float
+        Lateral pixel, µm.
+    margin_um : float
+        Planes kept beyond the object's extent, µm.
     level : float
-        Fraction of the strongest plane's largest |Δn| that marks a plane with an object.
+        Fraction of the largest projected |Δn| that marks an object.
 
     Returns
     -------
-    slice
+    keep : ndarray, bool, (Z, ny, nx)
+        The voxels inside an object's window.
     """
-    prof = np.abs(dn).max(axis=(1, 2))
-    on = np.flatnonzero(prof >= level * prof.max()) if prof.max() > 0 else np.arange(len(prof))
-    return slice(max(int(on.min()) - margin_planes, 0), min(int(on.max()) + 1 + margin_planes, len(prof)))
+    a = np.abs(dn)
+    proj = a.sum(axis=0)
+    on = proj >= level * proj.max() if proj.max() > 0 else np.ones(proj.shape, bool)
+    labels, count = ndimage.label(on)
+    _, (iy, ix) = ndimage.distance_transform_edt(labels == 0, return_indices=True)
+    nearest = labels[iy, ix]  # every pixel belongs to its nearest object
+    keep = np.zeros(dn.shape, bool)
+    for c in range(1, count + 1):
+        column = labels == c
+        prof = a[:, column].sum(axis=1)
+        core = prof >= 0.5 * prof.max()
+        z_c = float(np.sum(z_um[core] * prof[core]) / np.sum(prof[core]))
+        r = math.sqrt(column.sum() / math.pi) * pixel_um
+        planes = np.abs(np.asarray(z_um) - z_c) <= r + margin_um
+        keep[planes] |= (nearest == c)[None]
+    return keep
 
 
 def _roi_of(box_um, x_um, y_um):
@@ -145,27 +170,35 @@ class MultisliceMethod(PhaseMethod):
             rows, cols = _roi_of(ms.roi_um, v.x_um, v.y_um)
         else:
             rows, cols = objects_roi(dn, v.x_um, v.y_um, ms.roi_margin_um)
-        planes = object_planes(dn[:, rows, cols], int(math.ceil(ms.z_margin_um / dz)))
+        px = float(v.x_um[1] - v.x_um[0])
+        window = object_windows(dn[:, rows, cols], s.z_um, px, ms.z_margin_um)
+        on = np.flatnonzero(window.any(axis=(1, 2)))
+        planes = slice(int(on[0]), int(on[-1]) + 1)
         t0 = time.perf_counter()
-        model = ViewsMultislice(
-            s.optics,
-            v.lenslets,
-            v.x_um,
-            v.y_um,
-            s.z_um[planes],
-            roi=(rows, cols),
-            refine=ms.refine,
-            substeps=ms.substeps,
-            dz_um=dz,
-            source_spacing_na=ms.source_spacing_na,
-        )
-        measured = model.crop(views).astype(np.float64)
-        weight = model.crop(np.asarray(v.view_mask, np.float64))
+
+        def make(planes):
+            return ViewsMultislice(
+                s.optics,
+                v.lenslets,
+                v.x_um,
+                v.y_um,
+                s.z_um[planes],
+                roi=(rows, cols),
+                refine=ms.refine,
+                substeps=ms.substeps,
+                source_subsamples=ms.source_subsamples,
+                dz_um=dz,
+                source_spacing_na=ms.source_spacing_na,
+            )
+
+        everything = make(slice(0, len(s.z_um)))
+        measured = everything.crop(views).astype(np.float64)
+        weight = everything.crop(np.asarray(v.view_mask, np.float64))
         lo, hi = bounds(_sign_of(start.report, s.settings.tv.sign), s.settings.tv.dn_max)  # in Δn
         inside = np.asarray(v.mask[rows, cols], bool)[None]
         noise = float(start.report.get("tv_noise", float("nan")))
         mu = ms.tv_weight * (noise if math.isfinite(noise) else 0.0)
-        voxel = (dz, float(v.x_um[1] - v.x_um[0]), float(v.x_um[1] - v.x_um[0]))
+        voxel = (dz, px, px)
 
         k = ms.refine  # the unknowns stay on the views' grid; the model samples each pixel k x k
 
@@ -192,11 +225,37 @@ class MultisliceMethod(PhaseMethod):
                 g = None if g is None else g + mu * gt
             return f, g
 
-        x = project(dn[planes, rows, cols])
-        f, g = objective(x)
         n_data = max(float(weight.sum()), 1.0)
         # the discrepancy principle: a fit closer than the noise (and the model's own error) fits noise
         enough = 0.5 * n_data * noise**2 * ms.stop_residual_over_noise if noise > 0 else 0.0
+
+        def report(x_model, x, history, converged):
+            res = (np.asarray(x_model.views(fine(x)), np.float64) - measured) * np.sqrt(weight)
+            return {
+                **start.report,
+                "multislice_iterations_run": len(history["relative_change"]),
+                "multislice_converged": converged,
+                "multislice_objective_start": history["objective"][0],
+                "multislice_objective_final": history["objective"][-1],
+                "multislice_residual_rms": math.sqrt(float(np.sum(res * res)) / n_data),
+                "multislice_residual_over_noise": float(np.sum(res * res)) / n_data / noise**2 if noise > 0 else None,
+                "multislice_roi_px": [rows.start, rows.stop, cols.start, cols.stop],
+                "multislice_z_um": [float(x_model.z_um[0]), float(x_model.z_um[-1])],
+                "multislice_source_points": [x_model.n_sources, x_model.n_subsources],
+                "multislice_seconds": time.perf_counter() - t0,
+            }
+
+        # a start the model explains as it is (a weak object) is kept whole, tails of the missing cone
+        # included: cutting them would only lose the mass they carry
+        whole = project(dn[:, rows, cols])
+        r = (np.asarray(everything.views(fine(whole)), np.float64) - measured) * np.sqrt(weight)
+        if 0.5 * float(np.sum(r * r)) <= enough:
+            f0 = 0.5 * float(np.sum(r * r))
+            kept = report(everything, whole, {"objective": [f0], "relative_change": []}, True)
+            return Solution(start.phase, kept, {**start.history, "multislice": {"objective": [f0]}}, state=None)
+        model = make(planes)
+        x = project(np.where(window[planes], dn[planes, rows, cols], 0.0))  # the objects, not their tails
+        f, g = objective(x)
         history = {"objective": [f], "relative_change": []}
         step = 0.1 * max(float(np.abs(x).max()), 1e-3) / max(float(np.abs(g).max()), 1e-30)
         y, fy, gy, t_k, converged = x, f, g, 1.0, False
@@ -233,21 +292,9 @@ class MultisliceMethod(PhaseMethod):
                 break
         dn[:, rows, cols] = 0.0  # the model holds the objects: the first-order tails are gone
         dn[planes, rows, cols] = x
-        res = (np.asarray(model.views(fine(x)), np.float64) - measured) * np.sqrt(weight)
-        report = {
-            **start.report,
-            "multislice_iterations_run": len(history["relative_change"]),
-            "multislice_converged": converged,
-            "multislice_objective_start": history["objective"][0],
-            "multislice_objective_final": history["objective"][-1],
-            "multislice_residual_rms": math.sqrt(float(np.sum(res * res)) / n_data),
-            "multislice_residual_over_noise": float(np.sum(res * res)) / n_data / noise**2 if noise > 0 else None,
-            "multislice_roi_px": [rows.start, rows.stop, cols.start, cols.stop],
-            "multislice_z_um": [float(s.z_um[planes][0]), float(s.z_um[planes][-1])],
-            "multislice_source_points": model.n_sources,
-            "multislice_seconds": time.perf_counter() - t0,
-        }
-        return Solution((dn / to_dn).astype(np.float32), report, {**start.history, "multislice": history}, state=None)
+        phase = (dn / to_dn).astype(np.float32)
+        out = report(model, x, history, converged)
+        return Solution(phase, out, {**start.history, "multislice": history}, state=None)
 
     def settings(self) -> dict:
         """The Tikhonov α of the 'tv' start."""
