@@ -263,3 +263,22 @@ def test_manual_calibration_from_guide_points(make_napari_viewer, qtbot, bead, e
     # an empty guide layer is refused with the fix
     cw.guide.value = cw.add_guide_points()
     assert cw.run() is None and "holds no points" in errors[-1]
+
+
+def test_a_shapes_layer_bounds_the_multislice_region(make_napari_viewer):
+    """A rectangle drawn in a Shapes layer (µm, the layers' frame) is the region of the nonlinear
+    model in the settings the dock hands down; an empty layer is a one-line error."""
+    from napari_ssdpc.errors import SsdpcError
+
+    viewer = make_napari_viewer()
+    rw = _widgets.ReconstructWidget(viewer)
+    assert rw.region.value is None and "multislice" not in rw.settings_changes()
+    shapes = viewer.add_shapes([[[-10.0, -20.0], [-10.0, 30.0], [15.0, 30.0], [15.0, -20.0]]], name="region")
+    shapes.translate = (1.0, 2.0)
+    rw.reset_choices()
+    rw.region.value = shapes
+    assert rw.settings_changes()["multislice"]["roi_um"] == [-18.0, 32.0, -9.0, 16.0]
+    assert _widgets.session_for(viewer).settings().multislice.roi_um == [-18.0, 32.0, -9.0, 16.0]
+    rw.region.value = viewer.add_shapes(name="empty")
+    with pytest.raises(SsdpcError, match="holds no shape: draw the region"):
+        rw.settings_changes()

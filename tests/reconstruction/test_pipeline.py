@@ -204,3 +204,17 @@ def test_multislice_refines_the_tv_solution_of_a_weak_bead(case, calibration, re
     with pytest.raises(SsdpcError, match="outside the field of view"):
         roi = run_config(case.optics, z=(-30, 30), dz=2, method="multislice", multislice={"roi_um": [500, 520, 0, 20]})
         Reconstructor(roi, calibration, flat=case.flat).reconstruct(case.frame)
+
+
+def test_tv_names_the_multislice_method_beyond_the_first_order_regime(case, reconstructor, result, monkeypatch):
+    """'tv' reports the phase through its strongest object (Σ_z φ): the weak bead's 0.72 rad lies
+    well inside the first-order regime and nothing is said; past ``STRONG_PHASE_RAD`` (1.5 rad,
+    docs/nonlinear.md) the warning gives the phase and the residual and names the method to use."""
+    from napari_ssdpc.reconstruction.methods import tv
+
+    through = result.settings["tv_phase_through_rad"]
+    assert through == pytest.approx(2 * np.pi * 0.01 * 6.0 / case.optics.wavelength_um, rel=0.3)
+    assert through < tv.STRONG_PHASE_RAD
+    monkeypatch.setattr(tv, "STRONG_PHASE_RAD", through / 2)
+    with pytest.warns(SsdpcWarning, match=r"delays the light by 0\.\d rad .* --method multislice"):
+        reconstructor.reconstruct(case.frame)

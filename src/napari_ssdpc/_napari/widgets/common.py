@@ -11,7 +11,7 @@ from magicgui.widgets import Container, Label, PushButton
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.placement import frame_transform, place_frames
 from napari_ssdpc._napari.widgets.session import session_for
-from napari_ssdpc.errors import SsdpcWarning
+from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 
 #: Smallest height of a dock's scrolling content: with every dock open, the window fits 1280 x 800.
 MIN_DOCK_HEIGHT_PX = 80
@@ -25,7 +25,9 @@ __all__ = [
     "follow_layers",
     "frame_index",
     "image_layer_choices",
+    "region_um",
     "run_buttons",
+    "shapes_layer_choices",
     "show_layer",
     "wrap",
 ]
@@ -85,6 +87,47 @@ def calibration_layer_choices(viewer):
         ]
 
     return choices
+
+
+def shapes_layer_choices(viewer, none: str):
+    """Choices callable for a ComboBox of Shapes layers, ``none`` first (the default).
+
+    Parameters
+    ----------
+    viewer : napari.Viewer
+    none : str
+        Label of the "none" choice.
+
+    Returns
+    -------
+    callable
+    """
+    from napari.layers import Shapes
+
+    def choices(_widget=None):
+        return [(none, None)] + [(lyr.name, lyr) for lyr in reversed(viewer.layers) if isinstance(lyr, Shapes)]
+
+    return choices
+
+
+def region_um(layer) -> list[float]:
+    """The box around every shape of a Shapes layer, in the world's µm (the layers' shared frame).
+
+    Parameters
+    ----------
+    layer : napari.layers.Shapes
+        Rectangles, polygons, ... drawn over the views or the RI layers (last two axes y, x).
+
+    Returns
+    -------
+    list of float
+        [x_min, x_max, y_min, y_max], µm.
+    """
+    if not len(layer.data):
+        raise SsdpcError(f"the layer '{layer.name}' holds no shape: draw the region (a rectangle) in it first")
+    scale, shift = np.asarray(layer.scale)[-2:], np.asarray(layer.translate)[-2:]
+    yx = np.concatenate([np.asarray(d)[:, -2:] for d in layer.data]) * scale + shift
+    return [float(yx[:, 1].min()), float(yx[:, 1].max()), float(yx[:, 0].min()), float(yx[:, 0].max())]
 
 
 def follow_layers(viewer, container: Container):

@@ -16,7 +16,9 @@ from napari_ssdpc._napari.widgets.common import (
     follow_layers,
     frame_index,
     image_layer_choices,
+    region_um,
     run_buttons,
+    shapes_layer_choices,
     show_layer,
 )
 from napari_ssdpc._napari.widgets.jobs import JobRunner
@@ -95,6 +97,13 @@ class ReconstructWidget(StepWidget):
             tooltip="Tikhonov regularisation of the phase inversion (no unit; paper Eq. 7), "
             "relative to the strongest transfer function; 0 = the method's default",
         )
+        self.region = ComboBox(
+            label="multislice region",
+            choices=shapes_layer_choices(napari_viewer, "around the objects"),
+            tooltip="method 'multislice': a Shapes layer whose shapes (a rectangle drawn over the views or the "
+            "RI, µm) bound the region the nonlinear model covers; default: the objects of the 'tv' start "
+            "plus a margin",
+        )
         self.frames = ComboBox(
             label="frames",
             choices=["current frame", "all frames"],
@@ -126,6 +135,7 @@ class ReconstructWidget(StepWidget):
                 self.flat,
                 self.iterations,
                 self.alpha,
+                self.region,
                 self.frames,
                 self.store,
                 *self.outputs.values(),
@@ -162,10 +172,14 @@ class ReconstructWidget(StepWidget):
         Returns
         -------
         dict
-            RL iterations, and the chosen method's α unless 0 (its default).
+            RL iterations, the chosen method's α unless 0 (its default), and the multislice region
+            when a Shapes layer is chosen.
         """
         alpha = float(self.alpha.value)
-        return {"rl": {"iterations": int(self.iterations.value)}, **({"*": {"alpha": alpha}} if alpha else {})}
+        out = {"rl": {"iterations": int(self.iterations.value)}, **({"*": {"alpha": alpha}} if alpha else {})}
+        if self.region.value is not None:
+            out["multislice"] = {"roi_um": region_um(self.region.value)}
+        return out
 
     def inputs(self) -> dict:
         """The flat frame's data, or None (see :meth:`Session.job`)."""

@@ -8,7 +8,11 @@ docs/method.md).
 from __future__ import annotations
 
 import math
+import warnings
 
+import numpy as np
+
+from napari_ssdpc.errors import SsdpcWarning
 from napari_ssdpc.physics.design import design
 from napari_ssdpc.reconstruction.forward import padded_planes
 from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
@@ -16,7 +20,12 @@ from napari_ssdpc.reconstruction.methods.wotf import contrast_of, view_model
 from napari_ssdpc.reconstruction.regularised import TvInversion
 from napari_ssdpc.reconstruction.wotf import WotfInversion
 
-__all__ = ["TvMethod"]
+__all__ = ["STRONG_PHASE_RAD", "TvMethod"]
+
+#: Beyond this phase through an object (rad, as 'tv' measures it) the first-order model of the views
+#: (paper Eqs. 2-4) no longer holds: 'tv' loses mass and trails the object along z
+#: (docs/nonlinear.md measures where).
+STRONG_PHASE_RAD = 1.5
 
 
 class TvMethod(PhaseMethod):
@@ -53,7 +62,17 @@ class TvMethod(PhaseMethod):
             should_stop=should_stop,
         )
         history = {"tv": {"objective": report.objective, "relative_change": report.relative_change}}
-        return Solution(phi, report.to_dict(), history, state=phi)
+        out = report.to_dict()
+        out["tv_phase_through_rad"] = through = float(np.abs(np.asarray(phi).sum(axis=0)).max())
+        if self.setup.settings.method == "tv" and through > STRONG_PHASE_RAD:
+            warnings.warn(
+                f"an object delays the light by {through:.1f} rad (more than {STRONG_PHASE_RAD} rad) and the "
+                f"first-order model leaves {report.residual_over_noise:.0f} x the noise unexplained: 'tv' "
+                "underestimates such objects and trails them along z; reconstruct with --method multislice",
+                SsdpcWarning,
+                stacklevel=2,
+            )
+        return Solution(phi, out, history, state=phi)
 
     def settings(self) -> dict:
         """The Tikhonov α of the start."""
