@@ -138,9 +138,15 @@ def test_outputs_are_compared_with_inputs_after_resolving(tmp_path, monkeypatch)
         check_outputs({"calibration": "cal.png", "overlay": "cal.png"}, {})
     (tmp_path / "mine.png").write_bytes(b"holiday photo")
     with pytest.raises(SsdpcError, match="did not write.*--overwrite"):
-        check_outputs({"calibration": "mine.json", "overlay": "mine.png"}, {}, sidecars=["overlay"])
-    check_outputs({"calibration": "mine.json", "overlay": "mine.png"}, {}, sidecars=["overlay"], overwrite=True)
+        check_outputs({"calibration": "mine.json", "overlay": "mine.png"}, {})
+    check_outputs({"calibration": "mine.json", "overlay": "mine.png"}, {}, overwrite=True)
     assert raw.read_bytes() == b"raw" and (tmp_path / "mine.png").read_bytes() == b"holiday photo"
+    # the main output too: a user's own TIFF or JSON of that name is never replaced without --overwrite
+    for name, content in (("user.ome.tif", b"II*\x00 a user's image"), ("user.tif", b"II*\x00"), ("c.json", b"{}")):
+        (tmp_path / name).write_bytes(content)
+        with pytest.raises(SsdpcError, match=rf"the output {name} would replace a file napari-ssdpc did not write"):
+            check_outputs({"output": name}, {})
+        assert (tmp_path / name).read_bytes() == content
 
 
 @pytest.mark.parametrize("frames", [1, 3])

@@ -87,6 +87,10 @@ def test_inputs_are_checked(optics):
     model = ViewsMultislice(optics, lenslets, x, x, [0.0, 1.0], source_spacing_na=0.04)
     with pytest.raises(SsdpcError, match="shape"):
         model.views(np.zeros((3, 24, 24)))
+    need = model.bytes_needed
+    assert model.n_sources * model.n_subsources * len(lenslets) * model.m**2 * 8 < need
+    with pytest.raises(SsdpcError, match=r"region with 2 planes needs about .* GiB but .* are free: choose a smaller"):
+        ViewsMultislice(optics, lenslets, x, x, [0.0, 1.0], source_spacing_na=0.04, max_bytes=need - 1)
     rows, cols = square_roi(x, x, (5.0, -3.0), 10.0)
     assert rows.stop - rows.start == cols.stop - cols.start >= 10.0 / optics.object_pixel_um
     assert abs(np.mean(x[cols]) - 5.0) < optics.object_pixel_um and abs(np.mean(x[rows]) + 3.0) < optics.object_pixel_um

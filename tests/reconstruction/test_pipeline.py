@@ -1,5 +1,8 @@
 """Reconstruction pipeline: numbers on a simulated weak bead, both phase methods, bad input."""
 
+import dataclasses
+import re
+
 import numpy as np
 import pytest
 import tifffile
@@ -208,7 +211,7 @@ def test_multislice_refines_the_tv_solution_of_a_weak_bead(case, calibration, re
 
 def test_tv_names_the_multislice_method_beyond_the_first_order_regime(case, reconstructor, result, monkeypatch):
     """'tv' reports the phase through its strongest object (Σ_z φ): the weak bead's 0.72 rad lies
-    well inside the first-order regime and nothing is said; past ``STRONG_PHASE_RAD`` (1.5 rad,
+    well inside the first-order regime and nothing is said; past ``STRONG_PHASE_RAD`` (1.2 rad,
     docs/nonlinear.md) the warning gives the phase and the residual and names the method to use."""
     from napari_ssdpc.reconstruction.methods import tv
 
@@ -218,3 +221,65 @@ def test_tv_names_the_multislice_method_beyond_the_first_order_regime(case, reco
     monkeypatch.setattr(tv, "STRONG_PHASE_RAD", through / 2)
     with pytest.warns(SsdpcWarning, match=r"delays the light by 0\.\d rad .* --method multislice"):
         reconstructor.reconstruct(case.frame)
+
+
+@pytest.mark.parametrize("flat_na", [0.2, 0.3])
+def test_a_flat_at_another_condenser_na_is_refused(case, calibration, flat_na):
+    """A flat recorded at another condenser NA than the frames (here 0.2 or 0.3 for frames at 0.1)
+    gave Δn up to the clip; its lenslets' light shows the NA it was recorded at (the overlap of
+    condenser disk and sub-aperture), and so do the raw frames'."""
+    from napari_ssdpc.reconstruction import checks
+    from napari_ssdpc.simulation.sample_free import flat_frame
+
+    optics = case.optics.replace(condenser_na=flat_na)
+    other = flat_frame(optics, grid=case.grid, rng=np.random.default_rng(1))
+    config = run_config(case.optics, z=(-30, 30), dz=2)
+    with pytest.raises(SsdpcError, match=rf"flat frame: its lenslets are lit as by a condenser NA of about {flat_na}"):
+        Reconstructor(config, calibration, flat=other)
+    rec = Reconstructor(config, calibration, flat=case.flat)  # the right flat passes
+    levels, _, _ = rec.views._measure(case.frame, "frame")
+    na, excess = checks.apparent_condenser_na(levels, calibration.lenslets, case.optics)
+    assert na == pytest.approx(0.1, abs=0.01) and excess == pytest.approx(0, abs=0.05)
+    with pytest.raises(
+        SsdpcError,
+        match=rf"frame: its lenslets are lit as by a condenser NA of about 0.10, but the optics say {flat_na}",
+    ):
+        Reconstructor(run_config(optics, z=(-30, 30), dz=2), calibration).reconstruct(case.frame)
+
+
+@pytest.mark.parametrize("scale", [0.5, 1.5, 4.0])
+def test_an_exposure_change_is_normalised_and_reported(case, reconstructor, result, scale):
+    """The raw frame at half, 1.5x or 4x the flat's exposure scaled Δn with it (truth unchanged); its
+    views are normalised to the flat's level, the factor is reported and kept in the metadata."""
+    dark = 100.0  # the simulated camera's offset, ADU
+    frame = np.clip((case.frame.astype(np.float64) - dark) * scale + dark, 0, 65535).astype(np.uint16)
+    with pytest.warns(SsdpcWarning, match=rf"is {scale:.2f} x as bright as the flat frame"):
+        res = reconstructor.reconstruct(frame)
+    assert res.settings["exposure_ratio"] == pytest.approx(scale, rel=0.03)
+    assert result.settings["exposure_ratio"] == pytest.approx(1.0, abs=0.02)
+    peak = float(np.abs(result.delta_n).max())
+    assert float(np.abs(res.delta_n - result.delta_n).max()) < 0.15 * peak
+
+
+def test_the_sample_frame_given_as_the_flat_is_refused(case, calibration):
+    config = run_config(case.optics, z=(-30, 30), dz=2)
+    with pytest.raises(SsdpcError, match="frame equals the flat frame"):
+        Reconstructor(config, calibration, flat=case.frame).reconstruct(case.frame)
+
+
+@pytest.mark.parametrize("shift", [(3, 0), (-2, 10)])
+def test_a_moved_camera_or_an_edited_calibration_is_refused(case, calibration, reconstructor, shift):
+    """The elemental images of a frame shifted after calibration (the camera moved), or of a
+    calibration whose centres were edited, sit away from where it puts them: measured to 0.05 px
+    from the disks' cross-correlation, refused beyond 1.5 px."""
+    from napari_ssdpc.reconstruction import checks
+
+    dx, dy = shift
+    moved = np.roll(case.frame, (dy, dx), axis=(0, 1))
+    assert checks.ei_shift_px(case.frame, reconstructor.views._ei) == pytest.approx((0, 0), abs=0.1)
+    assert checks.ei_shift_px(moved, reconstructor.views._ei) == pytest.approx((dx, dy), abs=0.1)
+    with pytest.raises(SsdpcError, match=re.escape(f"sit {dx:+.1f}, {dy:+.1f} px (x, y) from where the calibration")):
+        reconstructor.reconstruct(moved)
+    edited = dataclasses.replace(calibration, centres_px=calibration.centres_px - np.array([dx, dy]))
+    with pytest.raises(SsdpcError, match="flat frame: its elemental images sit"):
+        Reconstructor(run_config(case.optics, z=(-30, 30), dz=2), edited, flat=case.flat)

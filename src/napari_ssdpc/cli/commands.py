@@ -72,7 +72,6 @@ def cmd_calibrate(args):
     check_outputs(
         {"calibration": out, "overlay": png},
         {"white frame": args.frame, "optics file": args.optics},
-        sidecars=["overlay"],
         overwrite=args.overwrite,
         replaceable=lambda p: is_ours(p) or (p.suffix == ".png" and _is_calibration(out)),  # older overlays: unstamped
     )
@@ -168,7 +167,7 @@ def cmd_simulate(args):
     from napari_ssdpc.simulation.simulate import simulate
 
     wanted = {"frame": args.output, "flat frame": args.flat, "white frame": args.white}
-    outs = check_outputs({k: v for k, v in wanted.items() if v}, {"optics file": args.optics})
+    outs = check_outputs({k: v for k, v in wanted.items() if v}, {"optics file": args.optics}, overwrite=args.overwrite)
     optics = _optics(args.optics)
     _check_simulate_numbers(args, optics)
     phantom, optics = make_phantom(args.phantom, optics, n_frames=args.frames)
@@ -240,7 +239,6 @@ def cmd_reconstruct(args):
     check_outputs(
         {("output" if n == "ri" else f"{n} output"): p for n, p in paths.items()},
         inputs,
-        sidecars=[f"{n} output" for n in save],
         overwrite=args.overwrite,
         folders=["output"] if is_zarr else [],
     )
@@ -337,5 +335,5 @@ def cmd_demo(args):
     if out.is_dir():
         writable_folder(out, "demo folder")
         files = {name: out / name for name in DEMO_FILES}
-        check_outputs(files, {"optics file": args.optics}, sidecars=files, overwrite=args.overwrite)
+        check_outputs(files, {"optics file": args.optics}, overwrite=args.overwrite)
     run_demo(out, optics=None if args.optics is None else _optics(args.optics), seed=args.seed)

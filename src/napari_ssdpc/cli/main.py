@@ -55,7 +55,8 @@ def build_parser():
     p.add_argument("--version", action="version", version=f"napari-ssdpc {__version__}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     overwrite_help = (
-        "replace existing files beside the output (overlay, OUT_<name>.ome.tif) that napari-ssdpc did not write"
+        "replace existing output files (and the overlay or OUT_<name>.ome.tif beside them) "
+        "that napari-ssdpc did not write"
     )
     optics_help = "optics YAML (schema of docs/paper-optics.yaml); default: the paper's optics"
 
@@ -96,6 +97,7 @@ def build_parser():
     s.add_argument("--rotation", type=float, default=0.0, help="MLA rotation on the sensor, degrees")
     s.add_argument("--frames", type=int, default=20, help="frames of the 'moving' time series")
     s.add_argument("--seed", type=int, default=0, help="random seed of the camera noise")
+    s.add_argument("--overwrite", action="store_true", help=overwrite_help)
     s.set_defaults(func=cmd_simulate)
 
     s = sub.add_parser("reconstruct", help="reconstruct the 3D refractive index of a raw frame or time series")

@@ -104,7 +104,6 @@ def check_outputs(
     outputs: Mapping[str, str | Path],
     inputs: Mapping[str, str | Path | None],
     *,
-    sidecars: Iterable[str] = (),
     overwrite: bool = False,
     replaceable: Callable[[Path], bool] = is_ours,
     folders: Iterable[str] = (),
@@ -117,13 +116,11 @@ def check_outputs(
         Role -> output path, e.g. ``{"calibration": "cal.json", "overlay": "cal.png"}``.
     inputs : mapping of str to path or None
         Role -> input path (None: not given).
-    sidecars : iterable of str
-        Roles in ``outputs`` that are written beside the main output: an existing file there is
-        replaced only when ``replaceable(path)`` (a file napari-ssdpc wrote) or ``overwrite``.
     overwrite : bool
-        Replace existing sidecars whatever they hold.
+        Replace existing files whatever they hold; otherwise an existing output file is replaced
+        only when ``replaceable(path)`` (a file napari-ssdpc wrote).
     replaceable : callable
-        ``replaceable(path) -> bool`` for an existing sidecar.
+        ``replaceable(path) -> bool`` for an existing output file.
     folders : iterable of str
         Roles in ``outputs`` that are folders (a store or a demo folder) rather than files.
 
@@ -138,7 +135,7 @@ def check_outputs(
         The first conflict, naming both paths and the fix.
     """
     outs = {role: Path(p) for role, p in outputs.items()}
-    sidecars, folders = set(sidecars), set(folders)
+    folders = set(folders)
     roles = list(outs)
     for i, a in enumerate(roles):
         for b in roles[i + 1 :]:
@@ -158,7 +155,7 @@ def check_outputs(
             continue
         if out.is_dir():
             raise SsdpcError(f"{role} {out} is a folder; give a file path")
-        if role in sidecars and out.exists() and not overwrite and not replaceable(out):
+        if out.exists() and not overwrite and not replaceable(out):
             raise SsdpcError(
                 f"the {role} {out} would replace a file napari-ssdpc did not write; move it away, "
                 "choose another output name or pass --overwrite"

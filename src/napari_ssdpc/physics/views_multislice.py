@@ -147,6 +147,8 @@ class ViewsMultislice:
     memory_mb : float
         Largest memory for the fields kept between the forward and the backward pass; beyond it
         the backward pass recomputes them (a third propagation).
+    max_bytes : int, optional
+        Refuse (:class:`SsdpcError`) a model that would need more memory than this, bytes.
 
     Attributes
     ----------
@@ -164,6 +166,8 @@ class ViewsMultislice:
         Source points (multislice propagations).
     n_subsources : int
         Sub-points per source point.
+    bytes_needed : int
+        Estimated peak memory of a misfit with its gradient, bytes.
     """
 
     def __init__(
@@ -186,6 +190,7 @@ class ViewsMultislice:
         dtype=np.complex64,
         xp=None,
         memory_mb: float = 2048.0,
+        max_bytes: int | None = None,
     ):
         self.xp = np if xp is None else xp
         self.cdtype = np.dtype(dtype)
@@ -233,13 +238,22 @@ class ViewsMultislice:
             wgt = np.repeat(cell[:, None], len(u_k), axis=1)
         wgt = wgt.reshape(len(w), q * q, len(u_k))
         self.n_sources, self.n_subsources = len(w), q * q
+        self.m = m = min(_even_fast(int(math.ceil((4 * self.rho + h) / du)) + 4), nv)
+        self.chunk = max(1, int(chunk))
+        self.memory_mb = float(memory_mb)
+        self.bytes_needed = self._bytes_needed(len(u_k))
+        if max_bytes is not None and self.bytes_needed > max_bytes:
+            raise SsdpcError(
+                f"the multislice model of a {nv * px:.0f} µm region with {len(z)} planes needs about "
+                f"{self.bytes_needed / 2**30:.1f} GiB but {max_bytes / 2**30:.1f} GiB are free: choose a smaller "
+                "region (--roi, or a Shapes layer in napari) or fewer source points (a larger source_spacing_na)"
+            )
         # --- propagation through the volume, per source point: exp(i2π δ [η(u + w) − η(w)]) (Eq. 6)
         f = np.fft.fftfreq(n, self.dx)
         u2 = (f[None, None, :] + w[:, 0, None, None]) ** 2 + (f[None, :, None] + w[:, 1, None, None]) ** 2
         e, e0 = eta(u2, nm, lam), eta(np.sum(w * w, axis=1), nm, lam).real[:, None, None]
         h_slab = defocus_factor(e, self.delta) * np.exp(-2j * np.pi * self.delta * e0)
         # --- lenslet crops: an m x m crop of the exit spectrum around u_k − w_j, for every pair ----
-        self.m = m = min(_even_fast(int(math.ceil((4 * self.rho + h) / du)) + 4), nv)
         off = np.arange(m) - m // 2
         c = np.rint((u_k[None] - w[:, None]) / du).astype(int)  # (S, K, 2): crop centres, lattice units
         ex, ey = c[..., 0, None] + off, c[..., 1, None] + off  # (S, K, m): envelope-grid indices
@@ -267,8 +281,6 @@ class ViewsMultislice:
         self._eta0 = xp_.asarray(eta0.astype(np.float32))[..., None, None, None]
         self._band = xp_.asarray(fm % nv)
         self._pix = xp_.asarray((pix[:, None] * pix[None, :]).astype(self.rdtype))
-        self.chunk = max(1, int(chunk))
-        self.memory_mb = float(memory_mb)
         self._kernels: list | None = None
         i0 = self._interpolate(self._intensity(None)[0])  # sample-free views: constant per lenslet
         self.i0 = np.asarray(_host(xp_, i0.mean(axis=(1, 2))), float)
@@ -279,6 +291,17 @@ class ViewsMultislice:
                 "lenslets, or make source_spacing_na smaller"
             )
         self._i0 = xp_.asarray(self.i0.astype(self.rdtype))[:, None, None]
+
+    def _bytes_needed(self, lenslets: int) -> int:
+        """Peak memory of :meth:`misfit`, bytes: the kept fields (up to ``memory_mb``), the lenslet
+        fields of every sub-point, the kept crop kernels, the propagators and one chunk's temporaries."""
+        c = self.cdtype.itemsize
+        s, q, n, m = self.n_sources, self.n_subsources, self.n, self.m
+        pairs = s * q * lenslets * m * m * c
+        fields = min(self.shape[0] * self.substeps * s * n * n * c, self.memory_mb * 2**20)
+        kernels = pairs if pairs <= self.memory_mb * 2**18 else 0
+        temporaries = self.chunk * (4 * q * lenslets * m * m + 6 * n * n) * c
+        return int(fields + pairs + kernels + 3 * s * n * n * c + temporaries)
 
     # ------------------------------------------------------------------------------- FFTs
     def _fft2(self, a):

@@ -1,6 +1,7 @@
 """From a raw frame to the views' contrast: checked once, extracted once, flat-fielded.
 
-Per frame (paper §2, docs/conventions.md): the frame is checked (shape, light, saturation), the
+Per frame (paper §2, docs/conventions.md): the frame is checked (shape, light, saturation, the
+condenser NA its lenslets' light shows, its elemental images where the calibration puts them), the
 dark offset is subtracted, every elemental image is resampled once onto the upright object grid
 (:func:`~napari_ssdpc.calibration.views.extract_views`), the light of every lenslet is checked
 against the flat, and each lit view is divided by its flat (its direct-light background becomes
@@ -74,7 +75,7 @@ class ViewContrast:
         fv = None
         if flat is not None:  # without a flat, each lenslet's direct light comes from the transfer model
             levels, noise, fv = self._measure(flat, "flat frame")
-            checks.check_flat(levels, noise, optics)
+            checks.check_flat(levels, noise, optics, lenslets=cal.lenslets)
             fv = np.clip(fv, 0, None)
         self.level = level = self._direct_light(fv)
         lit = level >= min_light * level.max()
@@ -82,6 +83,9 @@ class ViewContrast:
             raise SsdpcError("no lenslet receives direct light; check the flat frame and the condenser NA")
         self.lit = np.flatnonzero(lit)
         self.lenslets = [cal.lenslets[i] for i in self.lit]
+        self._ei = checks.ei_templates(cal, self.lit)  # where the calibration puts the lit images
+        if flat is not None:
+            checks.check_ei_shift(checks.ei_shift_px(flat, self._ei), "flat frame")
         if fv is not None:
             sub = fv[self.lit]
             good = sub > 0.3 * np.median(sub[:, self.mask], axis=1)[:, None, None]
@@ -151,12 +155,46 @@ class ViewContrast:
             The frame does not fit the calibration, holds no light, is saturated, or is lit
             unlike the flat (a white frame, another condenser NA).
         """
+        return self.measure(frame, name)[0]
+
+    def measure(self, frame, name: str = "frame") -> tuple[np.ndarray, float]:
+        """The views (see :meth:`__call__`) and the frame's exposure relative to the flat.
+
+        A frame recorded with another exposure time, lamp power or gain than its flat has every
+        view scaled by the same factor, and the first-order contrast I/I_flat − 1 with it (paper
+        Eq. 3: the phase would scale too). The factor is the median over the lit views of each
+        view's median (the background, where the sample does not cover most of the field); the
+        views are divided by it, and a factor beyond ±10 % is reported.
+
+        Parameters
+        ----------
+        frame : array_like, (H, W)
+            Raw frame, camera units.
+        name : str
+            For the messages.
+
+        Returns
+        -------
+        views : ndarray, float32, (K_lit, h, w)
+        exposure : float
+            The frame's light over the flat's (1 without a flat).
+        """
         warn_saturation(frame)
         levels, noise, all_views = self._measure(frame, name)
-        checks.check_frame_light(levels, noise, self.lit, self.level[self.lit], self.optics, name)
+        lit, expected = self.lit, self.level[self.lit]
+        checks.check_frame_light(levels, noise, lit, expected, self.optics, name, self.calibration.lenslets)
+        checks.check_ei_shift(checks.ei_shift_px(frame, self._ei), name)
         views = all_views[self.lit]
+        exposure = 1.0
         if self.flat is not None:
             views = views / self.flat
+            exposure = float(np.median([np.median(v[m]) for v, m in zip(views, self.view_mask)]))
+            if np.all(np.abs(views[self.view_mask] - 1) < 1e-6):
+                raise SsdpcError(
+                    f"{name} equals the flat frame (no contrast at all): give the flat recorded without the sample"
+                )
+            checks.check_exposure(exposure, name)
+            views = views / exposure
         else:
             views = views / np.array([np.median(v[self.mask]) for v in views])[:, None, None]
-        return np.clip(np.where(self.view_mask, views, 0), 0, None).astype(np.float32)
+        return np.clip(np.where(self.view_mask, views, 0), 0, None).astype(np.float32), exposure

@@ -304,7 +304,7 @@ class Reconstructor:
             beyond any sample.
         """
         t0 = time.perf_counter()
-        views = self.views(frame, name)
+        views, exposure = self.views.measure(frame, name)
         t1 = time.perf_counter()
         stacks = None if self.stacks is None else self.stacks(views, progress=progress, should_stop=should_stop)
         t2 = time.perf_counter()
@@ -326,7 +326,7 @@ class Reconstructor:
             x_um=self.x_um.copy(),
             convergence=history,
             timings={"preprocess_s": t1 - t0, "rl_s": t2 - t1, "phase_s": t3 - t2},
-            settings={**self.settings(), **sol.report},
+            settings={**self.settings(), **sol.report, "exposure_ratio": exposure},
             solution=sol,
         )
 

@@ -29,6 +29,7 @@ from scipy import ndimage
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.views_multislice import ViewsMultislice, square_roi
+from napari_ssdpc.reconstruction.checks import available_memory
 from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
 from napari_ssdpc.reconstruction.methods.tv import TvMethod
 from napari_ssdpc.reconstruction.regularised import bounds
@@ -74,10 +75,10 @@ def object_windows(dn, z_um, pixel_um: float, margin_um: float, level: float = O
     The first-order solution of an object is longer along z than the object (the missing cone)
     and a strong object trails a tail through the whole z range; neither is the object. The
     objects are the connected parts of the z-projected |Δn| above ``level`` of its largest; an
-    object's depth z_c is the |Δn|-weighted mean depth of the planes of its column that hold at
-    least half of its strongest plane, and its extent is its equivalent radius r (from its
-    footprint's area) on either side: every pixel of the region (given to the nearest object)
-    keeps the planes |z − z_c| ≤ r + ``margin_um``.
+    object's depth z_c is the |Δn|-weighted mean depth of the voxels of its column that reach at
+    least half of its largest |Δn| (its peak, not the tail), and its extent is its equivalent
+    radius r (from its footprint's area) on either side: every pixel of the region (given to the
+    nearest object) keeps the planes |z − z_c| ≤ r + ``margin_um``.
 
     Parameters
     ----------
@@ -106,9 +107,9 @@ def object_windows(dn, z_um, pixel_um: float, margin_um: float, level: float = O
     keep = np.zeros(dn.shape, bool)
     for c in range(1, count + 1):
         column = labels == c
-        prof = a[:, column].sum(axis=1)
-        core = prof >= 0.5 * prof.max()
-        z_c = float(np.sum(z_um[core] * prof[core]) / np.sum(prof[core]))
+        vox = a[:, column]  # (Z, pixels of the object's footprint)
+        core = vox >= 0.5 * vox.max()  # the object's peak, not the broad first-order tail
+        z_c = float(np.sum(np.asarray(z_um)[:, None] * vox * core) / np.sum(vox * core))
         r = math.sqrt(column.sum() / math.pi) * pixel_um
         planes = np.abs(np.asarray(z_um) - z_c) <= r + margin_um
         keep[planes] |= (nearest == c)[None]
@@ -189,6 +190,7 @@ class MultisliceMethod(PhaseMethod):
                 source_subsamples=ms.source_subsamples,
                 dz_um=dz,
                 source_spacing_na=ms.source_spacing_na,
+                max_bytes=available_memory(),
             )
 
         everything = make(slice(0, len(s.z_um)))
@@ -272,6 +274,11 @@ class MultisliceMethod(PhaseMethod):
                 if f_new <= fy + float(np.sum(gy * d)) + float(np.sum(d * d)) / (2 * step) or step < 1e-30:
                     break
                 step *= 0.5
+            if not math.isfinite(f_new):  # never hand on nonsense
+                raise SsdpcError(
+                    f"the multislice fit diverged at iteration {it + 1} (misfit {f:.4g}, then {f_new}); nothing "
+                    "was written: reconstruct with 'tv', or with a smaller source_spacing_na"
+                )
             change = float(np.linalg.norm(x_new - x)) / max(float(np.linalg.norm(x_new)), 1e-30)
             if f_new > f:  # the misfit rose: restart the momentum from the last point
                 t_k, y = 1.0, x
