@@ -286,6 +286,33 @@ def test_json_bad_files(white, tmp_path):
     _one_line_error(lambda: Calibration.from_json(tmp_path / "missing.json"), "not found")
 
 
+@pytest.mark.parametrize(
+    "edit",
+    [
+        lambda d: d["lenslets"][0].update(centre_px=[v + 3 for v in d["lenslets"][0]["centre_px"]]),
+        lambda d: [r.update(u=[-v for v in r["u"]]) for r in d["lenslets"]],  # would flip the sign of Δn
+        lambda d: d["grid"].update(flip_x=not d["grid"]["flip_x"]),
+        lambda d: d.update(ei_radius_px=2 * d["ei_radius_px"]),
+        lambda d: d["optics"]["objective"].update(magnification=40.0),
+    ],
+    ids=["centre+3px", "u-negated", "flip_x", "ei-radius-x2", "magnification-40x"],
+)
+def test_an_edited_calibration_is_refused_until_resigned(white, tmp_path, capsys, edit):
+    """Hand edits of a calibration file (each gave wrong numbers with exit 0) break its checksum:
+    a one-line error names both ways out; `ssdpc resign-calibration` accepts a deliberate edit."""
+    from napari_ssdpc.cli.main import main
+
+    _, _, cal = white
+    path = cal.to_json(tmp_path / "calib.json")
+    d = json.loads(path.read_text())
+    edit(d)
+    path.write_text(json.dumps(d, indent=1))
+    _one_line_error(lambda: Calibration.from_json(path), "edited after `ssdpc calibrate` wrote it")
+    assert main(["resign-calibration", str(path)]) == 0
+    assert "signed anew" in capsys.readouterr().out
+    assert Calibration.from_json(path).to_dict() == Calibration.from_dict(d, verify=False).to_dict()
+
+
 def test_json_write_failure_keeps_the_old_file(white, tmp_path, monkeypatch):
     _, _, cal = white
     path = cal.to_json(tmp_path / "calib.json")

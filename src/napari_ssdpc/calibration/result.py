@@ -8,6 +8,7 @@ resampled on the object grid (``views.extract_views``).
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,6 +23,23 @@ from napari_ssdpc.settings.optics import Optics
 
 CALIBRATION_FORMAT = "napari-ssdpc-calibration"
 CALIBRATION_VERSION = 1
+
+
+def content_checksum(d: dict) -> str:
+    """SHA-256 of a calibration's values (every key but ``checksum``), in canonical JSON.
+
+    Parameters
+    ----------
+    d : dict
+        As :meth:`Calibration.to_dict` gives it, or as read back from its file.
+
+    Returns
+    -------
+    str
+        Hex digest.
+    """
+    body = {k: v for k, v in d.items() if k != "checksum"}
+    return hashlib.sha256(json.dumps(body, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
 
 
 # ---------------------------------------------------------------- data classes
@@ -188,7 +206,7 @@ class Calibration:
         }
 
     @classmethod
-    def from_dict(cls, d: dict, source: str = "calibration") -> Calibration:
+    def from_dict(cls, d: dict, source: str = "calibration", verify: bool = True) -> Calibration:
         """A calibration from its JSON values; a one-line error names what is wrong.
 
         Parameters
@@ -197,6 +215,8 @@ class Calibration:
             As written by :meth:`to_dict`.
         source : str
             How messages name where it came from.
+        verify : bool
+            Check the content against its ``checksum`` (files from before the checksum have none).
 
         Returns
         -------
@@ -208,6 +228,12 @@ class Calibration:
             raise SsdpcError(
                 f"{source}: calibration version {d.get('version')!r} is not supported "
                 f"(this software reads version {CALIBRATION_VERSION}); re-run `ssdpc calibrate`"
+            )
+        if verify and "checksum" in d and d["checksum"] != content_checksum(d):
+            raise SsdpcError(
+                f"{source}: the calibration was edited after `ssdpc calibrate` wrote it (its checksum does not "
+                "match its content); re-run `ssdpc calibrate`, or accept a deliberate edit with "
+                "`ssdpc resign-calibration FILE`"
             )
         try:
             optics = Optics.from_dict(d["optics"], source=f"{source} optics")
@@ -263,18 +289,21 @@ class Calibration:
         Path
         """
         path = Path(path)
-        text = json.dumps(self.to_dict(), indent=1)
+        d = self.to_dict()
+        text = json.dumps({**d, "checksum": content_checksum(d)}, indent=1)
         with atomic_write(path) as tmp:
             tmp.write_text(text)
         return path
 
     @classmethod
-    def from_json(cls, path) -> Calibration:
+    def from_json(cls, path, verify: bool = True) -> Calibration:
         """Read a calibration JSON written by :meth:`to_json`.
 
         Parameters
         ----------
         path : str or Path
+        verify : bool
+            Refuse a file whose content no longer matches its checksum (edited by hand).
 
         Returns
         -------
@@ -287,7 +316,7 @@ class Calibration:
             d = json.loads(path.read_text())
         except (json.JSONDecodeError, UnicodeDecodeError):
             raise SsdpcError(f"{path}: corrupt calibration JSON; re-run `ssdpc calibrate`") from None
-        return cls.from_dict(d, source=str(path))
+        return cls.from_dict(d, source=str(path), verify=verify)
 
 
 @dataclass(eq=False)

@@ -22,6 +22,7 @@ from napari_ssdpc.io.paths import check_outputs, is_ours, writable_folder
 from napari_ssdpc.settings.outputs import QUANTITIES
 
 __all__ = [
+    "cmd_resign",
     "PHANTOMS",
     "cmd_bench",
     "cmd_calibrate",
@@ -150,6 +151,21 @@ def _check_simulate_numbers(args, optics):
     _check_seed(args.seed)
     if args.frames < 1 or args.frames > 10000:
         raise SsdpcError(f"--frames {args.frames}: give 1 to 10000 frames")
+
+
+def cmd_resign(args):
+    """Accept a deliberately edited calibration file: check it and write its checksum anew.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed options of `ssdpc resign-calibration`.
+    """
+    from napari_ssdpc.calibration.result import Calibration
+
+    cal = Calibration.from_json(args.calibration, verify=False)  # every value is still validated
+    cal.to_json(args.calibration)
+    print(f"{args.calibration}: signed anew; its edits are now its content")
 
 
 def cmd_simulate(args):

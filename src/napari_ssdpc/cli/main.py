@@ -20,6 +20,7 @@ from napari_ssdpc.cli.commands import (
     cmd_demo,
     cmd_design,
     cmd_reconstruct,
+    cmd_resign,
     cmd_simulate,
 )
 from napari_ssdpc.cli.options import add_reconstruction_options
@@ -79,6 +80,10 @@ def build_parser():
     )
     s.add_argument("--overwrite", action="store_true", help=overwrite_help)
     s.set_defaults(func=cmd_calibrate)
+
+    s = sub.add_parser("resign-calibration", help="accept a deliberately edited calibration JSON (new checksum)")
+    s.add_argument("calibration", help="calibration JSON written by `ssdpc calibrate`, edited by hand")
+    s.set_defaults(func=cmd_resign)
 
     s = sub.add_parser("simulate", help="simulate a raw light-field frame of a phantom")
     s.add_argument("phantom", choices=PHANTOMS)
