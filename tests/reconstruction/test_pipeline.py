@@ -117,6 +117,12 @@ def test_bad_settings(case, calibration):
         Reconstructor(case.optics, calibration)
     with pytest.raises(SsdpcError, match="takes a Calibration"):
         Reconstructor(run_config(case.optics), "calibration.json")
+    for dark in (float("nan"), -5.0, float("inf"), "100"):
+        with pytest.raises(SsdpcError, match="dark offset in camera units"):
+            Reconstructor(run_config(case.optics, z=(-10, 10), dz=2), calibration, dark=dark)
+    for light in (0.0, 2.0, float("nan")):
+        with pytest.raises(SsdpcError, match="fraction of the brightest lenslet's light"):
+            Reconstructor(run_config(case.optics, z=(-10, 10), dz=2), calibration, min_light=light)
 
 
 def test_cli_reconstruct_writes_ome_tiff_and_keeps_outputs_on_error(case, calibration, tmp_path, capsys):

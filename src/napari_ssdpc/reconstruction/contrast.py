@@ -67,6 +67,10 @@ class ViewContrast:
 
     def __init__(self, optics: Optics, calibration: Calibration, flat=None, dark=None, min_light: float = 0.05):
         self.optics, self.calibration = optics, calibration
+        if dark is not None and not (isinstance(dark, (int, float, np.number)) and 0 <= float(dark) < np.inf):
+            raise SsdpcError(f"dark = {dark!r}: give the camera's dark offset in camera units (a number >= 0), or None")
+        if not 0 < float(min_light) < 1:
+            raise SsdpcError(f"min_light = {min_light!r}: give a fraction of the brightest lenslet's light, 0 to 1")
         self.dark = None if dark is None else float(dark)
         cal = calibration
         geom = extract_views(np.zeros(cal.frame_shape, np.float32), cal)
