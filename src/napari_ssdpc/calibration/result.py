@@ -182,9 +182,10 @@ class Calibration:
         Returns
         -------
         dict
-            JSON-ready: format and version, grid, EI radius (px), kind, residual and the lenslet table.
+            JSON-ready: format and version, grid, EI radius (px), kind, residual, the lenslet table
+            and the checksum of them all.
         """
-        return {
+        d = {
             "format": CALIBRATION_FORMAT,
             "version": self.version,
             "kind": self.kind,
@@ -204,6 +205,7 @@ class Calibration:
             "lenslets": self.table,
             "optics": self.optics.to_dict(),
         }
+        return {**d, "checksum": content_checksum(d)}
 
     @classmethod
     def from_dict(cls, d: dict, source: str = "calibration", verify: bool = True) -> Calibration:
@@ -229,12 +231,6 @@ class Calibration:
                 f"{source}: calibration version {d.get('version')!r} is not supported "
                 f"(this software reads version {CALIBRATION_VERSION}); re-run `ssdpc calibrate`"
             )
-        if verify and "checksum" in d and d["checksum"] != content_checksum(d):
-            raise SsdpcError(
-                f"{source}: the calibration was edited after `ssdpc calibrate` wrote it (its checksum does not "
-                "match its content); re-run `ssdpc calibrate`, or accept a deliberate edit with "
-                "`ssdpc resign-calibration FILE`"
-            )
         try:
             optics = Optics.from_dict(d["optics"], source=f"{source} optics")
             grid = Grid.from_dict(d["grid"])
@@ -252,7 +248,7 @@ class Calibration:
             centres = np.array([r["centre_px"] for r in rows], dtype=float).reshape(-1, 2)
             bright = np.array([np.nan if r.get("brightness") is None else r["brightness"] for r in rows], float)
             dev = np.array([r.get("deviation_px") or [np.nan, np.nan] for r in rows], float).reshape(-1, 2)
-            return cls(
+            cal = cls(
                 grid=grid,
                 ei_radius_px=float(d["ei_radius_px"]),
                 optics=optics,
@@ -276,6 +272,13 @@ class Calibration:
             raise SsdpcError(
                 f"{source}: corrupt calibration ({type(e).__name__}: {e}); re-run `ssdpc calibrate`"
             ) from None
+        if verify and "checksum" in d and d["checksum"] != content_checksum(d):
+            raise SsdpcError(
+                f"{source}: the calibration was edited after `ssdpc calibrate` wrote it (its checksum does not "
+                "match its content); re-run `ssdpc calibrate`, or accept a deliberate edit with "
+                "`ssdpc resign-calibration FILE`"
+            )
+        return cal
 
     def to_json(self, path) -> Path:
         """Write the versioned JSON atomically (a failure never leaves a half file).
@@ -289,8 +292,7 @@ class Calibration:
         Path
         """
         path = Path(path)
-        d = self.to_dict()
-        text = json.dumps({**d, "checksum": content_checksum(d)}, indent=1)
+        text = json.dumps(self.to_dict(), indent=1)
         with atomic_write(path) as tmp:
             tmp.write_text(text)
         return path

@@ -139,26 +139,7 @@ class ViewContrast:
         return levels, _noise(dark_px if dark_px.size else img.ravel()), views
 
     def __call__(self, frame, name: str = "frame") -> np.ndarray:
-        """Dark-subtracted, flat-fielded, non-negative views of the lit lenslets.
-
-        Parameters
-        ----------
-        frame : array_like, (H, W)
-            Raw frame, camera units.
-        name : str
-            For the messages.
-
-        Returns
-        -------
-        ndarray, float32, (K_lit, h, w)
-            1 where a view holds only direct light.
-
-        Raises
-        ------
-        SsdpcError
-            The frame does not fit the calibration, holds no light, is saturated, or is lit
-            unlike the flat (a white frame, another condenser NA).
-        """
+        """The views of a raw frame: :meth:`measure` without the exposure."""
         return self.measure(frame, name)[0]
 
     def measure(self, frame, name: str = "frame") -> tuple[np.ndarray, float]:
@@ -180,8 +161,17 @@ class ViewContrast:
         Returns
         -------
         views : ndarray, float32, (K_lit, h, w)
+            Dark-subtracted, flat-fielded, non-negative views of the lit lenslets: 1 where a view
+            holds only direct light.
         exposure : float
             The frame's light over the flat's (1 without a flat).
+
+        Raises
+        ------
+        SsdpcError
+            The frame does not fit the calibration, holds no light, is saturated, is lit unlike
+            the flat (a white frame, another condenser NA), its elemental images moved, or it is
+            the flat itself.
         """
         warn_saturation(frame)
         levels, noise, all_views = self._measure(frame, name)
