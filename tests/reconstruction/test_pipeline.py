@@ -234,7 +234,7 @@ def test_a_flat_at_another_condenser_na_is_refused(case, calibration, flat_na):
     """A flat recorded at another condenser NA than the frames (here 0.2 or 0.3 for frames at 0.1)
     gave Δn up to the clip; its lenslets' light shows the NA it was recorded at (the overlap of
     condenser disk and sub-aperture), and so do the raw frames'."""
-    from napari_ssdpc.reconstruction import checks
+    from napari_ssdpc.reconstruction import consistency
     from napari_ssdpc.simulation.sample_free import flat_frame
 
     optics = case.optics.replace(condenser_na=flat_na)
@@ -244,7 +244,7 @@ def test_a_flat_at_another_condenser_na_is_refused(case, calibration, flat_na):
         Reconstructor(config, calibration, flat=other)
     rec = Reconstructor(config, calibration, flat=case.flat)  # the right flat passes
     levels, _, _ = rec.views._measure(case.frame, "frame")
-    na, excess = checks.apparent_condenser_na(levels, calibration.lenslets, case.optics)
+    na, excess = consistency.apparent_condenser_na(levels, calibration.lenslets, case.optics)
     assert na == pytest.approx(0.1, abs=0.01) and excess == pytest.approx(0, abs=0.05)
     with pytest.raises(
         SsdpcError,
@@ -278,12 +278,12 @@ def test_a_moved_camera_or_an_edited_calibration_is_refused(case, calibration, r
     """The elemental images of a frame shifted after calibration (the camera moved), or of a
     calibration whose centres were edited, sit away from where it puts them: measured to 0.05 px
     from the disks' cross-correlation, refused beyond 1.5 px."""
-    from napari_ssdpc.reconstruction import checks
+    from napari_ssdpc.reconstruction import consistency
 
     dx, dy = shift
     moved = np.roll(case.frame, (dy, dx), axis=(0, 1))
-    assert checks.ei_shift_px(case.frame, reconstructor.views._ei) == pytest.approx((0, 0), abs=0.1)
-    assert checks.ei_shift_px(moved, reconstructor.views._ei) == pytest.approx((dx, dy), abs=0.1)
+    assert consistency.ei_shift_px(case.frame, reconstructor.views._ei) == pytest.approx((0, 0), abs=0.1)
+    assert consistency.ei_shift_px(moved, reconstructor.views._ei) == pytest.approx((dx, dy), abs=0.1)
     with pytest.raises(SsdpcError, match=re.escape(f"sit {dx:+.1f}, {dy:+.1f} px (x, y) from where the calibration")):
         reconstructor.reconstruct(moved)
     edited = dataclasses.replace(calibration, centres_px=calibration.centres_px - np.array([dx, dy]))

@@ -16,35 +16,22 @@ from __future__ import annotations
 
 import math
 import os
-import warnings
 
 import numpy as np
-import scipy.fft as sfft
 
 from napari_ssdpc.calibration.saturation import FULL_SCALE_CODES
-from napari_ssdpc.errors import SsdpcError, SsdpcWarning
-from napari_ssdpc.settings.lenslets import circle_overlap_fraction
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.reconstruction import consistency
 
 __all__ = [
-    "EI_SHIFT_TOLERANCE_PX",
-    "EXPOSURE_TOLERANCE",
-    "MAX_EI_SHIFT_PX",
-    "NA_EXCESS",
-    "NA_RATIO",
     "MAX_DELTA_N",
-    "apparent_condenser_na",
     "available_memory",
-    "check_condenser_na",
-    "check_ei_shift",
-    "check_exposure",
     "check_constant",
     "check_flat",
     "check_frame_light",
     "check_memory",
     "check_optics_match",
     "check_result",
-    "ei_shift_px",
-    "ei_templates",
     "check_saturated",
     "dark_pixels",
     "estimate_memory",
@@ -269,13 +256,14 @@ def check_flat(levels, noise: float, optics, name: str = "flat frame", lenslets=
 
 
 def _condenser(levels, lenslets, optics, name: str, fix: str) -> None:
-    """:func:`check_condenser_na` on a frame's levels, unless they look like a fully open condenser
-    (the NA measurable from the levels ends near the objective's; :func:`_white` names that case)."""
+    """The condenser-NA check of :mod:`.consistency` on a frame's levels, unless they look like a
+    fully open condenser (the NA measurable from the levels ends near the objective's; :func:`_white`
+    names that case)."""
     if lenslets is None:
         return
-    seen = apparent_condenser_na(levels, lenslets, optics)
+    seen = consistency.apparent_condenser_na(levels, lenslets, optics)
     if seen[0] < 0.85 * optics.na:
-        check_condenser_na(seen, optics, name, fix)
+        consistency.check_condenser_na(seen, optics, name, fix)
 
 
 def _white(levels, top: float, optics, name: str, fix: str) -> None:
@@ -332,195 +320,6 @@ def check_frame_light(levels, noise: float, lit, expected, optics, name: str = "
             f"{name}: the lit lenslets' brightness differs from the flat's by {100 * spread:.0f}% (rms): the frame "
             "does not look like this instrument's frames at this condenser NA; check the calibration, the flat "
             "and the condenser aperture"
-        )
-
-
-def apparent_condenser_na(levels, lenslets, optics) -> tuple[float, float]:
-    """The condenser NA a frame's lenslet levels look recorded at, and how much better it fits.
-
-    A lenslet's direct light is the area of the condenser disk |u| ≤ NA_c/λ inside its sub-aperture
-    (paper Eq. 2): the overlap of two circles. The NA whose overlaps, scaled to their largest, best
-    fit the measured levels (scaled the same way) over the lenslets wholly inside the objective's
-    pupil, on a 0.005 NA grid. Where several NAs light the same lenslets alike (a small condenser
-    NA lights the few central lenslets at any NA), the fit cannot tell them apart: the excess
-    misfit of the optics' NA over the best says how clearly it is excluded.
-
-    Parameters
-    ----------
-    levels : ndarray, (K,)
-        Every lenslet's median light above the dark level, camera units.
-    lenslets : list of Lenslet
-        The calibration's lenslets (their ``u`` and ``fraction``).
-    optics : Optics
-        Wavelength, sub-aperture radius, objective and condenser NA.
-
-    Returns
-    -------
-    na : float
-        The best-fitting condenser NA.
-    excess : float
-        Σ (level − model)² at the optics' NA minus at the best, in units of the brightest lenslet's
-        light squared (1: one lenslet wholly lit where it should be dark).
-    """
-    inner = np.array([ln.fraction >= 0.999 for ln in lenslets])
-    d = np.hypot(*np.array([ln.u for ln in lenslets], float)[inner].T)
-    lv = np.clip(np.asarray(levels, float)[inner], 0, None)
-    lv = lv / max(lv.max(), 1e-30)
-
-    def misfit(na):
-        model = circle_overlap_fraction(d, optics.subaperture_radius, na / optics.wavelength_um)
-        return float(np.sum((lv - model / max(model.max(), 1e-30)) ** 2))
-
-    nas = np.arange(0.01, optics.na + 1e-9, 0.005)
-    err = [misfit(na) for na in nas]
-    best = int(np.argmin(err))
-    return float(nas[best]), misfit(float(optics.condenser_na)) - err[best]
-
-
-#: A frame is refused as lit at another condenser NA when the optics' NA fits its lenslets' light
-#: worse than the best NA by this much (a quarter of one lenslet's light, squared) and the two NAs
-#: differ by more than 30 % (the play of a condenser's scale).
-NA_EXCESS, NA_RATIO = 0.25, 1.3
-
-
-def check_condenser_na(seen: tuple[float, float], optics, name: str, fix: str) -> None:
-    """Refuse a frame lit at another condenser NA than the optics say.
-
-    Parameters
-    ----------
-    seen : (float, float)
-        :func:`apparent_condenser_na` of the frame.
-    optics : Optics
-    name, fix : str
-        For the message.
-    """
-    na_seen, excess = seen
-    na = float(optics.condenser_na)
-    if excess > NA_EXCESS and not 1 / NA_RATIO <= na_seen / na <= NA_RATIO:
-        raise SsdpcError(
-            f"{name}: its lenslets are lit as by a condenser NA of about {na_seen:.2f}, but the optics say {na:g}; "
-            f"{fix}"
-        )
-
-
-#: Largest shift of the elemental images from the calibration that is measured, and the shift
-#: beyond which a frame is refused (px).
-MAX_EI_SHIFT_PX, EI_SHIFT_TOLERANCE_PX = 16, 1.5
-
-
-def ei_templates(cal, lit) -> tuple[int, list]:
-    """The spectra of the calibrated disks of the lit lenslets, for :func:`ei_shift_px`.
-
-    Parameters
-    ----------
-    cal : Calibration
-    lit : ndarray of int
-        The lenslets lit by direct light.
-
-    Returns
-    -------
-    h : int
-        Half-width of the windows, px (the radius plus the largest shift measured).
-    items : list of (int, int, ndarray)
-        Per lenslet on the sensor: the pixel nearest its centre (x, y) and the conjugate spectrum
-        (rfft2, zero-padded to a fast size) of its zero-mean disk on a window of ``2 h + 1`` px.
-    """
-    r, h = float(cal.ei_radius_px), int(math.ceil(cal.ei_radius_px)) + MAX_EI_SHIFT_PX
-    yy, xx = np.mgrid[-h : h + 1, -h : h + 1].astype(float)
-    out = []
-    for k in lit:
-        cx, cy = (float(c) for c in cal.centres_px[k])
-        ix, iy = int(round(cx)), int(round(cy))
-        if iy - h < 0 or ix - h < 0 or iy + h >= cal.frame_shape[0] or ix + h >= cal.frame_shape[1]:
-            continue  # at the sensor's edge
-        disk = (np.hypot(xx - (cx - ix), yy - (cy - iy)) <= r).astype(float)
-        n = sfft.next_fast_len(2 * h + 1, real=True)
-        out.append((ix, iy, np.conj(sfft.rfft2(disk - disk.mean(), s=(n, n)))))
-    return h, out
-
-
-def ei_shift_px(img, templates) -> tuple[float, float]:
-    """How far a frame's elemental images sit from where the calibration puts them, px.
-
-    Each lit lenslet's elemental image is a disk of radius ``ei_radius_px`` (the field stop's
-    image). Around every calibrated centre the frame is cross-correlated with that disk; the
-    correlations of all lit lenslets are added (a moved camera or array shifts them all alike) and
-    the peak, refined by a parabola, is the shift.
-
-    Parameters
-    ----------
-    img : ndarray, (H, W)
-        The frame, camera units.
-    templates : (int, list)
-        :func:`ei_templates` of the calibration.
-
-    Returns
-    -------
-    (float, float)
-        (dx, dy) of the images from the calibration, px.
-    """
-    h, items = templates
-    if not items:
-        return 0.0, 0.0
-    n = items[0][2].shape[0]
-    acc = np.zeros((n, n))
-    for ix, iy, spec in items:
-        win = np.asarray(img[iy - h : iy + h + 1, ix - h : ix + h + 1], float)
-        w = win - win.mean()
-        acc += sfft.irfft2(sfft.rfft2(w, s=(n, n)) * spec, s=(n, n)) / max(float(w.std()), 1e-12)
-    m = MAX_EI_SHIFT_PX
-    near = np.roll(acc, (m, m), axis=(0, 1))[: 2 * m + 1, : 2 * m + 1]  # shifts −m..m
-    py, px = np.unravel_index(int(np.argmax(near)), near.shape)
-    out = []
-    for peak, line in ((px, near[py]), (py, near[:, px])):
-        sub = 0.0
-        if 0 < peak < len(line) - 1:
-            a, b, d = line[peak - 1], line[peak], line[peak + 1]
-            den = a - 2 * b + d
-            sub = 0.5 * (a - d) / den if den < 0 else 0.0
-        out.append(peak - m + sub)
-    return out[0], out[1]
-
-
-def check_ei_shift(shift, name: str) -> None:
-    """Refuse a frame whose elemental images are not where the calibration puts them.
-
-    Parameters
-    ----------
-    shift : (float, float)
-        :func:`ei_shift_px` of the frame.
-    name : str
-        For the message.
-    """
-    dx, dy = shift
-    if math.hypot(dx, dy) > EI_SHIFT_TOLERANCE_PX:
-        raise SsdpcError(
-            f"{name}: its elemental images sit {dx:+.1f}, {dy:+.1f} px (x, y) from where the calibration puts them: "
-            "the camera or the array moved, or the calibration was edited; recalibrate on a white frame "
-            "recorded in this position"
-        )
-
-
-#: A frame brighter or dimmer than its flat by more than this (relative) is reported.
-EXPOSURE_TOLERANCE = 0.1
-
-
-def check_exposure(exposure: float, name: str) -> None:
-    """Report a frame lit differently from its flat (its views are normalised to the flat's level).
-
-    Parameters
-    ----------
-    exposure : float
-        The frame's background light over the flat's.
-    name : str
-        For the message.
-    """
-    if abs(exposure - 1) > EXPOSURE_TOLERANCE:
-        warnings.warn(
-            f"{name} is {exposure:.2f} x as bright as the flat frame (exposure time, lamp or gain changed): its views "
-            "were normalised to the flat's level (metadata exposure_ratio); record frame and flat alike",
-            SsdpcWarning,
-            stacklevel=3,
         )
 
 

@@ -18,7 +18,7 @@ from napari_ssdpc.calibration.saturation import warn_saturation
 from napari_ssdpc.calibration.views import extract_views
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics import transfer
-from napari_ssdpc.reconstruction import checks
+from napari_ssdpc.reconstruction import checks, consistency
 from napari_ssdpc.settings.lenslets import HALVES
 from napari_ssdpc.settings.optics import Optics
 
@@ -87,9 +87,9 @@ class ViewContrast:
             raise SsdpcError("no lenslet receives direct light; check the flat frame and the condenser NA")
         self.lit = np.flatnonzero(lit)
         self.lenslets = [cal.lenslets[i] for i in self.lit]
-        self._ei = checks.ei_templates(cal, self.lit)  # where the calibration puts the lit images
+        self._ei = consistency.ei_templates(cal, self.lit)  # where the calibration puts the lit images
         if flat is not None:
-            checks.check_ei_shift(checks.ei_shift_px(flat, self._ei), "flat frame")
+            consistency.check_ei_shift(consistency.ei_shift_px(flat, self._ei), "flat frame")
         if fv is not None:
             sub = fv[self.lit]
             good = sub > 0.3 * np.median(sub[:, self.mask], axis=1)[:, None, None]
@@ -177,7 +177,7 @@ class ViewContrast:
         levels, noise, all_views = self._measure(frame, name)
         lit, expected = self.lit, self.level[self.lit]
         checks.check_frame_light(levels, noise, lit, expected, self.optics, name, self.calibration.lenslets)
-        checks.check_ei_shift(checks.ei_shift_px(frame, self._ei), name)
+        consistency.check_ei_shift(consistency.ei_shift_px(frame, self._ei), name)
         views = all_views[self.lit]
         exposure = 1.0
         if self.flat is not None:
@@ -187,7 +187,7 @@ class ViewContrast:
                 raise SsdpcError(
                     f"{name} equals the flat frame (no contrast at all): give the flat recorded without the sample"
                 )
-            checks.check_exposure(exposure, name)
+            consistency.check_exposure(exposure, name)
             views = views / exposure
         else:
             views = views / np.array([np.median(v[self.mask]) for v in views])[:, None, None]
