@@ -231,8 +231,10 @@ class MultisliceMethod(PhaseMethod):
         # the discrepancy principle: a fit closer than the noise (and the model's own error) fits noise
         enough = 0.5 * n_data * noise**2 * ms.stop_residual_over_noise if noise > 0 else 0.0
 
-        def report(x_model, x, history, converged):
-            res = (np.asarray(x_model.views(fine(x)), np.float64) - measured) * np.sqrt(weight)
+        def residual(x_model, x):
+            return (np.asarray(x_model.views(fine(x)), np.float64) - measured) * np.sqrt(weight)
+
+        def report(x_model, res, history, converged):
             return {
                 **start.report,
                 "multislice_iterations_run": len(history["relative_change"]),
@@ -250,10 +252,10 @@ class MultisliceMethod(PhaseMethod):
         # a start the model explains as it is (a weak object) is kept whole, tails of the missing cone
         # included: cutting them would only lose the mass they carry
         whole = project(dn[:, rows, cols])
-        r = (np.asarray(everything.views(fine(whole)), np.float64) - measured) * np.sqrt(weight)
+        r = residual(everything, whole)
         if 0.5 * float(np.sum(r * r)) <= enough:
             f0 = 0.5 * float(np.sum(r * r))
-            kept = report(everything, whole, {"objective": [f0], "relative_change": []}, True)
+            kept = report(everything, r, {"objective": [f0], "relative_change": []}, True)
             return Solution(start.phase, kept, {**start.history, "multislice": {"objective": [f0]}}, state=None)
         model = make(planes)
         x = project(np.where(window[planes], dn[planes, rows, cols], 0.0))  # the objects, not their tails
@@ -300,7 +302,7 @@ class MultisliceMethod(PhaseMethod):
         dn[:, rows, cols] = 0.0  # the model holds the objects: the first-order tails are gone
         dn[planes, rows, cols] = x
         phase = (dn / to_dn).astype(np.float32)
-        out = report(model, x, history, converged)
+        out = report(model, residual(model, x), history, converged)
         return Solution(phase, out, {**start.history, "multislice": history}, state=None)
 
     def settings(self) -> dict:
