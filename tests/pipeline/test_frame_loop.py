@@ -39,6 +39,17 @@ class CountingRec:
         return Result(v + 1.5, v, v, None, {}, {}, solution=Solution(v), **grid)
 
 
+class ResumedSink(MemorySink):
+    """A sink that already holds some frames (a store being resumed)."""
+
+    def __init__(self, held):
+        super().__init__()
+        self.held = set(held)
+
+    def _open(self, job, grid, source):
+        return set(self.held)
+
+
 @pytest.fixture(scope="module")
 def job(synthetic_series):
     optics, cal, _, _, _ = synthetic_series
@@ -84,10 +95,17 @@ def test_a_stop_ends_the_wait_for_the_next_live_frame(job):
 def test_warm_starts_hand_each_frame_the_previous_solution(job):
     frames = np.stack([np.full(job.calibration.frame_shape, k, np.uint16) for k in (10, 20, 30)])
     cold, warm = CountingRec(), CountingRec()
-    Pipeline(job, reconstructor=cold).run(frames, MemorySink(), progress=False)
-    Pipeline(job, reconstructor=warm).run(frames, MemorySink(), progress=False, warm_start=True)
+    Pipeline(job, reconstructor=cold).run(frames, MemorySink(), progress=False, warm_start=False)
+    Pipeline(job, reconstructor=warm).run(frames, MemorySink(), progress=False)  # the configuration's default
     assert cold.warm == [None, None, None]
     assert warm.warm == [None, pytest.approx(0.01), pytest.approx(0.02)]
+
+
+def test_a_frame_after_one_done_by_another_run_starts_cold(job):
+    frames = np.stack([np.full(job.calibration.frame_shape, k, np.uint16) for k in (10, 20, 30, 40)])
+    rec = CountingRec()
+    Pipeline(job, reconstructor=rec).run(frames, ResumedSink({1}), progress=False, warm_start=True)
+    assert rec.warm == [None, None, pytest.approx(0.03)]  # frames 0, 2 (cold: 1 was not solved here), 3
 
 
 def test_sinks_refuse_sources_they_cannot_hold(job, tmp_path):

@@ -263,9 +263,17 @@ def cmd_reconstruct(args):
     distributed = args.workers is not None or args.scheduler is not None
     if distributed and not is_zarr:
         raise SsdpcError("--workers/--scheduler spread the frames of a time series; write it to OME-Zarr (-o OUT.zarr)")
+    follow = getattr(args, "follow", False)
+    if follow and (distributed or not is_zarr):
+        raise SsdpcError("--follow writes the frames one after the other into a store: give -o OUT.zarr, no --workers")
+    if follow and not (math.isfinite(args.idle) and args.idle > 0):
+        raise SsdpcError(f"--idle must be a positive number of seconds, got {args.idle}")
     cal = Calibration.from_json(args.calibration)
     cfg = run_config(args, None if args.optics is None else _optics(args.optics), fallback=cal.optics)
-    source = StoredFrames(args.raw if is_zarr else read_frame(args.raw))  # a series streams, frame by frame
+    if follow:
+        source = _followed(args.raw, args.idle)
+    else:
+        source = StoredFrames(args.raw if is_zarr else read_frame(args.raw))  # a series streams, frame by frame
     flat = read_frame(args.flat, allow_series=False, name="flat frame") if args.flat else None
     meta = {
         "software": SOFTWARE,
@@ -277,6 +285,9 @@ def cmd_reconstruct(args):
         raise SsdpcError(f"{args.raw} holds {len(source)} frames; write a time series to OME-Zarr (-o OUT.zarr)")
     with tqdm_callback("building operators", unit="plane", disable=distributed) as cb:
         pipeline = Pipeline(Job(cfg, cal, flat), progress=cb, workers=args.workers, scheduler=args.scheduler)
+    if follow:
+        _follow(pipeline, source, sink, out, cfg.outputs.save)
+        return
     if is_zarr:
         _report_series(pipeline.run(source, sink), out, cfg.outputs.save)
         return
@@ -289,6 +300,36 @@ def cmd_reconstruct(args):
         f"volume {dn.shape} (z, y, x), voxel {voxel[0]:g} x {voxel[1]:.4f} x {voxel[2]:.4f} µm; "
         f"delta n from {dn.min():+.4f} to {dn.max():+.4f}"
     )
+
+
+def _followed(path, idle_s):
+    """The recording to follow, once its first frame has arrived."""
+    from napari_ssdpc.io.followed import FollowedFrames
+
+    print(f"following {path}: waiting for frames (Ctrl-C stops; a rerun resumes)", file=sys.stderr, flush=True)
+    return FollowedFrames(path, idle_s=idle_s)
+
+
+def _follow(pipeline, source, sink, out, save):
+    """Reconstruct a recording as it is written; report the latency from frame on disk to result."""
+    import time
+
+    latency = []
+
+    def written(t, done, total, result):
+        latency.append(time.time() - source.arrived_at.get(t, time.time()))
+
+    try:
+        report = pipeline.run(source, sink, on_frame=written, progress=True)
+    finally:
+        if latency:
+            print(
+                f"{len(latency)} frames followed; latency from frame on disk to result {np.median(latency):.2f} s "
+                f"(median), {max(latency):.2f} s (max)",
+                file=sys.stderr,
+            )
+    print(f"no new frame for {source.idle_s:g} s: stopped", file=sys.stderr)
+    _report_series(report, out, save)
 
 
 def _report_series(report, out, save):

@@ -106,7 +106,10 @@ def build_parser():
     s.set_defaults(func=cmd_simulate)
 
     s = sub.add_parser("reconstruct", help="reconstruct the 3D refractive index of a raw frame or time series")
-    s.add_argument("raw", help="raw light-field frame or (t, y, x) series, TIFF/OME-TIFF")
+    s.add_argument(
+        "raw",
+        help="raw light-field frame or (t, y, x) series: TIFF/OME-TIFF, OME-Zarr, or with --follow a folder of TIFFs",
+    )
     s.add_argument("--optics", help="optics YAML; default: the optics stored in the calibration")
     s.add_argument("--calibration", required=True, help="calibration JSON from `ssdpc calibrate`")
     s.add_argument("--flat", help="flat frame (no sample, same condenser NA) for flat-fielding")
@@ -116,6 +119,19 @@ def build_parser():
     )
     s.add_argument("--workers", type=int, help="spread the frames of a series over a local Dask cluster of N workers")
     s.add_argument("--scheduler", help="spread the frames over an existing Dask cluster (tcp://host:8786)")
+    s.add_argument(
+        "--follow",
+        action="store_true",
+        help="reconstruct a recording still being written (a growing TIFF or OME-Zarr, or a folder of TIFF files) "
+        "into OUT.zarr as its frames arrive; Ctrl-C stops, a rerun resumes",
+    )
+    s.add_argument(
+        "--idle",
+        type=float,
+        default=60.0,
+        metavar="SECONDS",
+        help="with --follow: stop when no frame has arrived for this long (default 60)",
+    )
     s.add_argument("--overwrite", action="store_true", help=overwrite_help)
     s.set_defaults(func=cmd_reconstruct)
 

@@ -33,6 +33,8 @@ FLAGS = {
     "dn-max": "tv.dn_max",
     "tv-lambda": "tv.lambda_scale",
     "tv-iterations": "tv.iterations",
+    "tv-warm-iterations": "tv.warm_iterations",
+    "warm-start": "warm_start",
     "refraction-increment": "refraction_increment_um3_pg",
     "device": "device",
 }
@@ -90,6 +92,9 @@ def add_reconstruction_options(parser: argparse.ArgumentParser) -> None:
         text = _help(key)
         if flag == "method":
             text = "phase method: " + "; ".join(f"{n}: {e.summary}" for n, e in METHODS.items()) + " (default tv)"
+        if ann is bool:  # --flag / --no-flag
+            parser.add_argument(f"--{flag}", action=argparse.BooleanOptionalAction, default=None, help=text)
+            continue
         parser.add_argument(f"--{flag}", type=kind, choices=choices, help=text)
     parser.add_argument(
         "--roi",

@@ -171,11 +171,15 @@ class _Squeezed:
 
 
 def _open_tiff(path: Path):
-    """A memory map of an uncompressed TIFF series, else a lazy page-by-page reader."""
+    """A memory map of an uncompressed TIFF series, else a lazy page-by-page reader; a file of
+    one-page series of one shape (frames appended one by one) is a series of those pages."""
     import tifffile
 
     if not path.is_file():
         raise SsdpcError(f"file not found: {path} (check the path)")
+    appended = _appended_frames(path)
+    if appended is not None:
+        return appended
     try:
         return np.squeeze(tifffile.memmap(path, mode="r"))
     except Exception:  # compressed, tiled or not contiguous: read page by page
@@ -199,18 +203,48 @@ def _open_tiff(path: Path):
     return PagedSeries(tif, series)
 
 
+def _appended_frames(path: Path):
+    """A :class:`PagedSeries` of the pages when the file holds several one-frame series of one
+    shape and type (each frame appended as its own series), else None."""
+    import tifffile
+
+    try:
+        tif = tifffile.TiffFile(path)
+    except Exception:
+        return None  # reported by the readers below
+    kinds = {(tuple(s.shape), str(s.dtype)) for s in tif.series}
+    if len(tif.series) < 2 or len(kinds) != 1 or len(next(iter(kinds))[0]) != 2:
+        tif.close()
+        return None
+    return PagedSeries(tif, None)
+
+
 class PagedSeries:
-    """(t, y, x) view of a TIFF series that decodes one page per frame."""
+    """(t, y, x) view of a TIFF series that decodes one page per frame.
+
+    Parameters
+    ----------
+    tif : tifffile.TiffFile
+    series : tifffile.TiffPageSeries or None
+        The series of frames; None: every series of the file is one frame (pages appended).
+    """
 
     def __init__(self, tif, series):
-        shape = tuple(s for s in series.shape if s != 1)
+        self._appended = series is None
+        if series is None:
+            first = tif.series[0]
+            shape, dtype = (len(tif.series), *first.shape), first.dtype
+        else:
+            shape, dtype = tuple(s for s in series.shape if s != 1), series.dtype
         if len(shape) not in (2, 3):
             raise SsdpcError(f"{tif.filename}: expected a 2D frame or a (t, y, x) series, got shape {series.shape}")
-        self._tif, self.shape, self.dtype = tif, shape, series.dtype
+        self._tif, self.shape, self.dtype = tif, shape, dtype
         self.ndim = len(shape)
 
     def __getitem__(self, t):
         try:
+            if self._appended:
+                return self._tif.series[int(t)].asarray()
             return self._tif.asarray(key=int(t) if self.ndim == 3 else 0, series=0).reshape(self.shape[-2:])
         except Exception as e:  # a damaged page
             name = self._tif.filename

@@ -26,7 +26,17 @@ import numpy as np
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.files import glob_escape, os_error, pid_alive
 
-__all__ = ["DONE", "STAMP", "StoreLock", "done_frames", "mask_incomplete", "open_store", "read_complete", "write_frame"]
+__all__ = [
+    "DONE",
+    "STAMP",
+    "StoreLock",
+    "done_frames",
+    "grow_store",
+    "mask_incomplete",
+    "open_store",
+    "read_complete",
+    "write_frame",
+]
 
 DONE = "ssdpc_done"  # root array: 1 where a frame is completely written
 STAMP = "ssdpc_series"  # root attribute: what the store holds (input, settings, outputs)
@@ -319,3 +329,26 @@ def mask_incomplete(data, out):
     import dask.array as da
 
     return da.where(keep, data, np.float32(np.nan))
+
+
+def grow_store(out, n_frames: int) -> None:
+    """Lengthen a store's t axis to ``n_frames`` (a followed recording that grew); new frames are
+    not done, so readers show them as NaN until they are written.
+
+    Parameters
+    ----------
+    out : str or Path
+        The store (made by :func:`open_store`).
+    n_frames : int
+        Frames it must hold at least.
+    """
+    import zarr
+
+    try:
+        root = zarr.open_group(str(out), mode="r+")
+        arrays = [root[DONE]] + [root[name]["0"] for name, node in root.groups() if "0" in node]
+        for a in arrays:
+            if a.shape[0] < n_frames:
+                a.resize((int(n_frames),) + tuple(a.shape[1:]))
+    except OSError as e:
+        raise os_error(e, Path(out)) from None

@@ -127,7 +127,7 @@ class Pipeline:
         iteration_progress=None,
         should_stop=None,
         stop_after: int | None = None,
-        warm_start: bool = False,
+        warm_start: bool | None = None,
     ) -> RunReport:
         """Reconstruct every frame of ``source`` that ``sink`` does not hold yet.
 
@@ -147,8 +147,10 @@ class Pipeline:
             True stops the run (:class:`~napari_ssdpc.errors.Cancelled`).
         stop_after : int, optional
             Process at most this many pending frames (a partial run, for tests and previews).
-        warm_start : bool
-            Start every frame's iterative solve from the previous frame's solution.
+        warm_start : bool, optional
+            Start every frame's iterative solve where the previous frame's ended (default: the
+            configuration's ``reconstruction.warm_start``). A frame after one done by an earlier
+            run starts cold; Dask runs solve every frame cold.
 
         Returns
         -------
@@ -166,6 +168,8 @@ class Pipeline:
 
             return run_on_dask(self, source, sink, progress=progress is not False, stop_after=stop_after)
         rec = self.reconstructor
+        if warm_start is None:
+            warm_start = bool(self.job.config.reconstruction.warm_start)
         done = sink.open(self.job, OutputGrid.of(rec), source)
         try:
             return self._loop(
@@ -206,6 +210,8 @@ class Pipeline:
                     bar.update(1)
                     if on_frame is not None:
                         on_frame(t, len(done) + len(timings), total, result)
+                else:
+                    warm = None  # the next frame's neighbour was solved by another run
                 t += 1
         finally:
             bar.close()

@@ -17,7 +17,7 @@ import numpy as np
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.frames import write_ome_tiffs
-from napari_ssdpc.io.store import StoreLock, open_store, write_frame
+from napari_ssdpc.io.store import StoreLock, grow_store, open_store, write_frame
 from napari_ssdpc.settings.outputs import layout, parse_save
 
 __all__ = ["MemorySink", "OmeTiffSink", "OutputGrid", "Sink", "ZarrSink"]
@@ -217,6 +217,7 @@ class ZarrSink(Sink):
         self.save = parse_save(list(save))
         self.meta = dict(meta or {})
         self._lock: StoreLock | None = None
+        self._length = 0
         if not self.out.parent.is_dir():
             raise SsdpcError(f"output folder does not exist: {self.out.parent} (create it first)")
         if self.out.exists() and not self.out.is_dir():
@@ -224,12 +225,14 @@ class ZarrSink(Sink):
 
     def _open(self, job, grid, source) -> set[int]:
         n = source.available()
-        if not source.finished():
+        ident = source.identity()
+        growing = bool(ident.get("followed"))  # a recording still being written: the store grows with it
+        if not (source.finished() or growing):
             raise SsdpcError(f"{source.name}: a store needs the series' length; follow live frames into memory")
         layout = grid.layout(self.save)
         stamp = {
-            "input": source.identity(),
-            "frames": n,
+            "input": ident,
+            "frames": None if growing else n,
             "frame_shape": list(source.frame_shape),
             "recipe": job.result_key,
             "outputs": sorted(layout),
@@ -237,9 +240,13 @@ class ZarrSink(Sink):
         self._lock = StoreLock(self.out).__enter__()  # one writer per store
         attrs = {**self.meta, "settings": grid.settings}
         done = open_store(self.out, n, layout, grid.voxel_um, stamp, attrs, grid.origin_um)
+        self._length = int(done.shape[0])
         return set(np.flatnonzero(done[:] == 1).tolist())
 
     def _write(self, t, result) -> float:
+        if t >= self._length:  # a followed recording grew
+            grow_store(self.out, t + 1)
+            self._length = t + 1
         return write_frame(self.out, t, result.images(self.save))
 
     def _close(self) -> None:

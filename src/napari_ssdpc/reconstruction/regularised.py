@@ -37,6 +37,8 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.fft as sfft
@@ -47,7 +49,7 @@ from napari_ssdpc.reconstruction.forward import ViewModel, apply
 from napari_ssdpc.reconstruction.tv_report import TvReport
 from napari_ssdpc.settings.reconstruction import SIGNS
 
-__all__ = ["LAMBDA_PER_NOISE", "TvInversion", "bounds"]
+__all__ = ["LAMBDA_PER_NOISE", "TvInversion", "TvState", "bounds"]
 
 #: ℓ of the sparsity term μ‖φ‖₁ with μ = λ/ℓ, in units of the axial resolution R_z: without it a
 #: constant offset inside the field stop (the unmeasured slice mean) costs only its boundary.
@@ -66,6 +68,34 @@ PROBE = 12
 LAMBDA_PER_NOISE = 1.0
 #: ADMM penalty ρ relative to the strongest lateral frequency's data weight Σ_k,z |A|²/Z.
 RHO_PER_DATA = 0.5
+
+
+@dataclass
+class TvState:
+    """Where an ADMM solve ended: the start of the next frame of a series.
+
+    The splits' variables carry what the solve learned of the sample (its edges in z₁, the
+    support and sign in z₂, the multipliers u₁ and u₂); a frame that differs a little from the
+    previous one starts next to its own solution and needs a fraction of the iterations.
+
+    Attributes
+    ----------
+    phi : array, float32, (Z, ny, nx)
+        Phase on the padded z grid (the model's planes), rad, on the model's device.
+    z1, u1 : array, float32, (3, Z, ny, nx)
+        Gradient split and its scaled multiplier.
+    z2, u2 : array, float32, (Z, ny, nx)
+        Constraint split and its scaled multiplier.
+    sign : str
+        The sign constraint the solve used ('denser', 'lighter' or 'any'; 'auto' resolved).
+    """
+
+    phi: Any
+    z1: Any
+    u1: Any
+    z2: Any
+    u2: Any
+    sign: str
 
 
 class TvInversion:
@@ -211,8 +241,9 @@ class TvInversion:
         ----------
         contrast : ndarray, shape (K, ny, nx)
             I_k / I0_k − 1 of each view (0 outside the field stop).
-        warm : ndarray, shape (Z, ny, nx), optional
-            Starting point (the Tikhonov phase).
+        warm : ndarray, shape (Z, ny, nx), or TvState, optional
+            Starting point: a phase on the output planes (the Tikhonov phase), or where the
+            previous frame's solve ended (its variables and its sign: 'auto' probes no more).
         sign : {'auto', 'denser', 'lighter', 'any'}
             φ ≥ 0, φ ≤ 0 or either; 'auto': the sign whose short solve explains the data
             better (lower objective after a few iterations with each).
@@ -236,9 +267,12 @@ class TvInversion:
         phi : numpy.ndarray, float32, shape (Z, ny, nx)
             On the host, whatever the model's device.
         report : TvReport
+            With the end state (``report.state``, a :class:`TvState`).
         """
         if sign not in SIGNS:
             raise SsdpcError(f"sign '{sign}': use one of {', '.join(SIGNS)}")
+        if isinstance(warm, TvState) and sign == "auto":
+            sign = warm.sign
         if sign == "auto":
             return self._auto_sign(contrast, warm, phi_max, lam, iterations, tol, progress, should_stop)
         spec = self.model.full_spectra(contrast)
@@ -246,19 +280,23 @@ class TvInversion:
         band = self.model.take(spec)  # (P, K)
         rhs0 = self.model.put(apply(self.ah_h, band), self.nz)
         scale = sigma * math.sqrt(self.data_scale) if math.isfinite(sigma) and sigma > 0 else 1e-3
-        report = TvReport(noise=sigma, lam_auto=lam is None, sign=sign)
+        report = TvReport(noise=sigma, lam_auto=lam is None, sign=sign, warm=isinstance(warm, TvState))
         lam_abs = LAMBDA_PER_NOISE * scale * (1.0 if lam is None else float(lam))
         report.lam = lam_abs
         cell = float(np.prod(self.voxel))
         # the variables live on the padded grid, on the device
         xp = self.xp
-        phi = xp.zeros((self.nz,) + self.shape, np.float32)
-        if warm is not None:
-            phi[self.planes] = self.bk.asarray(warm, np.float32)
-        z1 = self._grad(phi)
-        u1 = xp.zeros_like(z1)
-        z2 = self._project(phi, sign, phi_max)
-        u2 = xp.zeros_like(phi)
+        if isinstance(warm, TvState):
+            phi, z1, u1, z2, u2 = (xp.array(a, copy=True) for a in (warm.phi, warm.z1, warm.u1, warm.z2, warm.u2))
+            xp.clip(z2, *bounds(sign, phi_max), out=z2)
+        else:
+            phi = xp.zeros((self.nz,) + self.shape, np.float32)
+            if warm is not None:
+                phi[self.planes] = self.bk.asarray(warm, np.float32)
+            z1 = self._grad(phi)
+            u1 = xp.zeros_like(z1)
+            z2 = self._project(phi, sign, phi_max)
+            u2 = xp.zeros_like(phi)
         g = xp.empty_like(z1)
         thresh = np.float32(lam_abs / self.rho * cell)
         l1 = thresh / np.float32(self.sparsity_um)  # μ = λ / ℓ: the medium is Δn = 0 where the data need nothing
@@ -289,6 +327,7 @@ class TvInversion:
                 report.converged = True
                 break
         out = self._project(phi, sign, phi_max)  # the feasible point nearest the last iterate
+        report.state = TvState(phi, z1, u1, z2, u2, sign)
         res = self._data(apply(self.ah, self.model.take(self._fft(out))), band)
         expected = float(sigma**2 * self.mask.mean() * self.model.multiplicity.sum())
         report.residual_over_noise = res / expected if expected > 0 else float("nan")

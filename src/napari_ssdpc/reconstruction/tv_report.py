@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 __all__ = ["TvReport"]
 
@@ -31,6 +32,12 @@ class TvReport:
         The sign constraint used ('denser', 'lighter' or 'any').
     residual_over_noise : float
         ‖Aφ − c‖² over the band divided by its expectation from the noise alone.
+    sign_objectives : dict
+        With sign 'auto': the objective each sign's probe reached.
+    warm : bool
+        The solve started where the previous frame's ended.
+    state : TvState or None
+        Where the solve ended (the start of the next frame); not metadata.
     """
 
     iterations: int = 0
@@ -43,6 +50,8 @@ class TvReport:
     sign: str = "any"
     residual_over_noise: float = float("nan")
     sign_objectives: dict = field(default_factory=dict)
+    warm: bool = False
+    state: Any = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict:
         """Plain numbers for the result's metadata."""
@@ -55,4 +64,5 @@ class TvReport:
             "tv_lambda_auto": self.lam_auto,
             "tv_sign": self.sign,
             "tv_residual_over_noise": self.residual_over_noise,
+            "tv_warm_start": self.warm,
         }

@@ -108,7 +108,7 @@ class TvSettings(SettingsModel):
     """The 'tv' method: the same operators with total variation and the physical constraints."""
 
     #: Keys read at every solve: changing them keeps the built operators.
-    runtime: ClassVar[frozenset[str]] = frozenset({"sign", "dn_max", "lambda_scale", "iterations"})
+    runtime: ClassVar[frozenset[str]] = frozenset({"sign", "dn_max", "lambda_scale", "iterations", "warm_iterations"})
 
     alpha: float = _alpha(0.1, "the strongest frequency's Σ_k,z |A|² / K: the Tikhonov start")
     sign: Sign = Field("auto", description="sign of Δn against the medium; auto: the one the data support")
@@ -117,6 +117,9 @@ class TvSettings(SettingsModel):
         None, 1e-3, 1e3, "TV weight relative to the noise-based choice; empty: automatic (1)"
     )
     iterations: int = bounded(60, 1, 2000, "most ADMM iterations")
+    warm_iterations: int = bounded(
+        20, 1, 2000, "most ADMM iterations of a frame that starts where the previous frame's solve ended"
+    )
 
 
 class RlSettings(SettingsModel):
@@ -187,7 +190,7 @@ class ReconstructionSettings(SettingsModel):
     """How to reconstruct: the z grid (µm), the phase method and its section, the device."""
 
     #: Keys read at every frame: changing them keeps the built operators.
-    runtime: ClassVar[frozenset[str]] = frozenset({"refraction_increment_um3_pg"})
+    runtime: ClassVar[frozenset[str]] = frozenset({"refraction_increment_um3_pg", "warm_start"})
 
     z_min_um: float = bounded(DEFAULT_Z_UM[0], -5000.0, 5000.0, "first plane, µm from the focal plane (z > 0: farther)")
     z_max_um: float = bounded(DEFAULT_Z_UM[1], -5000.0, 5000.0, "last plane, µm from the focal plane")
@@ -197,6 +200,9 @@ class ReconstructionSettings(SettingsModel):
         0.19, 0.05, 0.5, "specific refraction increment for the dry mass, µm³/pg"
     )
     device: Literal["cpu", "gpu"] = Field("cpu", description="cpu (NumPy) or gpu (CuPy, napari-ssdpc[gpu])")
+    warm_start: bool = Field(
+        True, description="start each frame of a series where the previous frame's solve ended (serial runs)"
+    )
     tv: TvSettings = Field(default_factory=TvSettings, description="the 'tv' method")
     wotf: WotfSettings = Field(default_factory=WotfSettings, description="the 'wotf' method")
     rl: RlSettings = Field(default_factory=RlSettings, description="the 'rl' method and the directional stacks")

@@ -256,7 +256,7 @@ class MultisliceMethod(PhaseMethod):
         if 0.5 * float(np.sum(r * r)) <= enough:
             f0 = 0.5 * float(np.sum(r * r))
             kept = report(everything, r, {"objective": [f0], "relative_change": []}, True)
-            return Solution(start.phase, kept, {**start.history, "multislice": {"objective": [f0]}}, state=None)
+            return Solution(start.phase, kept, {**start.history, "multislice": {"objective": [f0]}}, state=start.state)
         model = make(planes)
         x = project(np.where(window[planes], dn[planes, rows, cols], 0.0))  # the objects, not their tails
         f, g = objective(x)
@@ -303,7 +303,7 @@ class MultisliceMethod(PhaseMethod):
         dn[planes, rows, cols] = x
         phase = (dn / to_dn).astype(np.float32)
         out = report(model, residual(model, x), history, converged)
-        return Solution(phase, out, {**start.history, "multislice": history}, state=None)
+        return Solution(phase, out, {**start.history, "multislice": history}, state=start.state)
 
     def settings(self) -> dict:
         """The Tikhonov α of the 'tv' start."""

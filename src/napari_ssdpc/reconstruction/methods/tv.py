@@ -17,7 +17,7 @@ from napari_ssdpc.physics.design import design
 from napari_ssdpc.reconstruction.forward import padded_planes
 from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
 from napari_ssdpc.reconstruction.methods.wotf import contrast_of, view_model
-from napari_ssdpc.reconstruction.regularised import TvInversion
+from napari_ssdpc.reconstruction.regularised import TvInversion, TvState
 from napari_ssdpc.reconstruction.wotf import WotfInversion
 
 __all__ = ["STRONG_PHASE_RAD", "TvMethod"]
@@ -30,8 +30,12 @@ STRONG_PHASE_RAD = 1.2
 
 
 class TvMethod(PhaseMethod):
-    """ADMM with anisotropic TV, sparsity, the sign of Δn, |Δn| ≤ dn_max and the field stop; without
-    a warm start each frame starts from its Tikhonov solution."""
+    """ADMM with anisotropic TV, sparsity, the sign of Δn, |Δn| ≤ dn_max and the field stop.
+
+    Without a warm start a frame starts from its Tikhonov solution and runs up to ``iterations``;
+    a frame of a series warm-started from the previous frame's solution starts from where that
+    solve ended (all ADMM variables and the sign 'auto' chose) and runs up to
+    ``warm_iterations``, stopping on the same relative change."""
 
     name = "tv"
 
@@ -51,14 +55,19 @@ class TvMethod(PhaseMethod):
     def _solve(self, views, stacks, warm, progress, should_stop):
         v, t = self.setup.views, self.setup.settings.tv
         contrast = contrast_of(views, v.view_mask)
-        start = warm.phase if warm is not None else self.wotf.phase(contrast) * v.mask
+        state = None if warm is None else warm.state
+        if isinstance(state, TvState):
+            start, iterations = state, t.warm_iterations
+        else:
+            start = warm.phase if warm is not None else self.wotf.phase(contrast) * v.mask
+            iterations = t.iterations
         phi, report = self.tv.phase(
             contrast,
             warm=start,
             sign=t.sign,
             phi_max=2 * math.pi * self.setup.dz_um * t.dn_max / self.setup.optics.wavelength_um,  # Δn = λφ/(2π dz)
             lam=t.lambda_scale,
-            iterations=t.iterations,
+            iterations=iterations,
             progress=None if progress is None else (lambda i, n, *_: progress(i, n, "TV")),
             should_stop=should_stop,
         )
@@ -73,7 +82,7 @@ class TvMethod(PhaseMethod):
                 SsdpcWarning,
                 stacklevel=2,
             )
-        return Solution(phi, out, history, state=phi)
+        return Solution(phi, out, history, state=report.state)
 
     def settings(self) -> dict:
         """The Tikhonov α of the start."""

@@ -1,0 +1,257 @@
+"""A recording still being written, read frame by frame as it grows (``ssdpc reconstruct --follow``).
+
+Three kinds of recording are followed: a TIFF whose pages are appended (one page per frame), a
+(t, y, x) OME-Zarr image whose t axis grows, and a folder whose TIFF files (one frame each, in
+natural name order) keep arriving. A frame counts as arrived when a later one exists, or when
+the recording has not changed for ``settle_s`` (a writer finishing the last frame). The
+recording counts as finished once no frame has arrived for ``idle_s``.
+
+The identity of a followed recording is its path, frame shape and data type and the SHA-256 of
+its first frame: a store resumed from a later run checks that it still follows the same
+recording, whatever has been appended since.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+import threading
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from napari_ssdpc.errors import SsdpcError, SsdpcWarning
+
+__all__ = ["FollowedFrames", "kind_of_recording"]
+
+#: How often the recording is looked at while waiting, s.
+POLL_S = 0.2
+_TIFF = (".tif", ".tiff")
+
+
+def kind_of_recording(path: Path) -> str:
+    """'tiff', 'zarr' or 'folder' (of TIFF files), from what ``path`` is.
+
+    Parameters
+    ----------
+    path : Path
+
+    Returns
+    -------
+    str
+    """
+    if path.is_file():
+        if path.suffix.lower() not in _TIFF:
+            raise SsdpcError(f"{path}: --follow reads a TIFF, an OME-Zarr image or a folder of TIFF files")
+        return "tiff"
+    if path.is_dir():
+        if any((path / n).exists() for n in (".zgroup", ".zarray", "zarr.json")):
+            return "zarr"
+        return "folder"
+    raise SsdpcError(f"{path} does not exist; start the recording first, or give the path it will be written to")
+
+
+def _natural_key(name: str):
+    return [int(p) if p.isdigit() else p.lower() for p in re.split(r"(\d+)", name)]
+
+
+class FollowedFrames:
+    """Frames of a recording that is still being written (a :class:`~napari_ssdpc.pipeline.sources.FrameSource`).
+
+    Parameters
+    ----------
+    path : str or Path
+        A TIFF, an OME-Zarr image or a folder of TIFF files.
+    idle_s : float
+        The recording is finished once no frame has arrived for this long, s.
+    settle_s : float
+        The newest frame counts as arrived once the recording has not changed for this long, s.
+    first_wait_s : float, optional
+        How long to wait for the first frame, s (default ``idle_s``).
+    should_stop : callable, optional
+        Checked while waiting for the first frame.
+
+    Attributes
+    ----------
+    arrived_at : dict of int to float
+        ``time.time()`` at which each frame was first seen complete (for the latency).
+    """
+
+    def __init__(self, path, *, idle_s: float = 30.0, settle_s: float = 1.0, first_wait_s=None, should_stop=None):
+        self.path = Path(path)
+        self.kind = kind_of_recording(self.path)
+        self.idle_s, self.settle_s = float(idle_s), float(settle_s)
+        self.arrived_at: dict[int, float] = {}
+        self._lock = threading.Lock()
+        self._count, self._ready, self._files, self._gaps_named = 0, 0, [], set()
+        self._signature, self._changed = None, time.monotonic()
+        self._last_arrival = time.monotonic()
+        self._reader = None
+        wait_s = self.idle_s if first_wait_s is None else float(first_wait_s)
+        deadline = time.monotonic() + wait_s
+        while self._scan() == 0:
+            if time.monotonic() > deadline or (should_stop is not None and should_stop()):
+                raise SsdpcError(
+                    f"{self.path}: no complete frame arrived within {wait_s:g} s; start the recording, or "
+                    "wait longer with --idle SECONDS"
+                )
+            time.sleep(POLL_S)
+        first = self[0]
+        if first.ndim != 2:
+            raise SsdpcError(f"{self.path}: frame 0 has shape {first.shape}; expected one 2D frame per page or file")
+        self._shape, self._dtype = tuple(int(v) for v in first.shape), first.dtype
+        self._first_hash = hashlib.sha256(np.ascontiguousarray(first).tobytes()).hexdigest()
+
+    # ---------------------------------------------------------------- the protocol
+    @property
+    def name(self) -> str:
+        """The recording's absolute path."""
+        return str(self.path.resolve())
+
+    @property
+    def frame_shape(self) -> tuple[int, int]:
+        """(H, W) of frame 0, px."""
+        return self._shape
+
+    def available(self) -> int:
+        """Frames that have arrived completely."""
+        return self._scan()
+
+    def finished(self) -> bool:
+        """No frame has arrived for ``idle_s`` and none is being written."""
+        self._scan()
+        return self._count == self._ready and time.monotonic() - self._last_arrival > self.idle_s
+
+    def wait(self, timeout_s: float) -> None:
+        """Look again after ``timeout_s`` (at most :data:`POLL_S`).
+
+        Parameters
+        ----------
+        timeout_s : float
+            Longest wait, s.
+        """
+        time.sleep(max(0.0, min(float(timeout_s), POLL_S)))
+        self._scan()
+
+    def identity(self) -> dict:
+        """Path, frame shape, data type and the SHA-256 of frame 0 (the rest is still growing)."""
+        return {
+            "path": self.name,
+            "followed": True,
+            "frame_shape": list(self._shape),
+            "dtype": str(self._dtype),
+            "sha256": self._first_hash,
+        }
+
+    def __getitem__(self, t) -> np.ndarray:
+        t = int(t)
+        if not 0 <= t < max(self._ready, 1):
+            raise IndexError(f"frame {t} of {self._ready} arrived")
+        try:
+            frame = self._read(t)
+        except SsdpcError:
+            raise
+        except Exception as e:  # a writer between its steps, a damaged page
+            raise SsdpcError(
+                f"{self.path}: frame {t} cannot be read ({type(e).__name__}); check the recording"
+            ) from None
+        return np.array(frame, copy=True)
+
+    # ---------------------------------------------------------------- the recording
+    def _scan(self) -> int:
+        """Count the frames present, and how many of them have arrived completely."""
+        with self._lock:
+            count, signature = self._look()
+            now = time.monotonic()
+            if signature != self._signature:
+                self._signature, self._changed = signature, now
+            settled = now - self._changed >= self.settle_s
+            ready = count if settled else max(count - 1, 0)
+            if ready > self._ready:
+                stamp = time.time()
+                for t in range(self._ready, ready):
+                    self.arrived_at[t] = stamp
+                self._ready, self._last_arrival = ready, now
+            self._count = count
+            return self._ready
+
+    def _look(self) -> tuple[int, tuple]:
+        """(frames present, a signature that changes whenever the recording does)."""
+        if self.kind == "tiff":
+            st = self.path.stat()
+            self._reader = None  # reopened: the file has grown
+            return self._tiff_pages(st.st_size), (st.st_size, st.st_mtime_ns)
+        if self.kind == "zarr":
+            array = self._zarr()
+            newest = max((e.stat().st_mtime_ns for e in _entries(self._level_dir)), default=0)
+            return int(array.shape[0]) if array.ndim == 3 else 1, (tuple(array.shape), newest)
+        files = sorted(
+            (p for p in self.path.iterdir() if p.suffix.lower() in _TIFF), key=lambda p: _natural_key(p.name)
+        )
+        self._files = files
+        self._name_gaps(files)
+        last = files[-1].stat() if files else None
+        return len(files), (len(files), None if last is None else (last.st_size, last.st_mtime_ns))
+
+    def _tiff_pages(self, size: int) -> int:
+        """Pages whose data lie wholly within the file."""
+        import tifffile
+
+        try:
+            with tifffile.TiffFile(self.path) as tif:
+                n = 0
+                for page in tif.pages:
+                    offsets, counts = getattr(page, "dataoffsets", ()), getattr(page, "databytecounts", ())
+                    if not offsets or any(o + c > size for o, c in zip(offsets, counts)):
+                        break
+                    n += 1
+                return n
+        except Exception:  # a header being written: nothing readable yet
+            return 0
+
+    def _zarr(self):
+        import zarr
+
+        node = zarr.open(str(self.path), mode="r")
+        level = "0"
+        if not hasattr(node, "shape"):
+            level = node.attrs.get("multiscales", [{}])[0].get("datasets", [{"path": "0"}])[0]["path"]
+            node = node[level]
+        self._level_dir = self.path / level if level else self.path
+        return node
+
+    def _read(self, t: int) -> np.ndarray:
+        import tifffile
+
+        if self.kind == "tiff":
+            with tifffile.TiffFile(self.path) as tif:
+                return tif.pages[t].asarray()
+        if self.kind == "zarr":
+            array = self._zarr()
+            return np.asarray(array[t] if array.ndim == 3 else array[...]).squeeze()
+        return tifffile.imread(self._files[t])
+
+    def _name_gaps(self, files) -> None:
+        """Warn once per gap in a numbered sequence of files (a frame lost by the writer)."""
+        numbers = [int(m.group(1)) for p in files if (m := re.search(r"(\d+)(?=\D*$)", p.stem))]
+        if len(numbers) != len(files) or len(numbers) < 2:
+            return
+        for a, b in zip(numbers, numbers[1:]):
+            if b > a + 1 and (a, b) not in self._gaps_named:
+                self._gaps_named.add((a, b))
+                missing = f"{a + 1}" if b == a + 2 else f"{a + 1}-{b - 1}"
+                warnings.warn(
+                    f"{self.path}: file number {missing} is missing between {a} and {b}; the frames are "
+                    "reconstructed in file order, so frame indices after the gap are one per file present",
+                    SsdpcWarning,
+                    stacklevel=2,
+                )
+
+
+def _entries(folder: Path):
+    try:
+        return list(Path(folder).iterdir())
+    except OSError:
+        return []
