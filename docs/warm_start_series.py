@@ -43,7 +43,7 @@ RESOLUTION_UM = (20.7, 3.9)
 def run(job, rec, frames, phantoms, warm: bool):
     """One pass over the series; per frame Δn, the solver's report and the truth metrics."""
     grid = {"z_um": rec.z_um, "y_um": rec.y_um, "x_um": rec.x_um}
-    keep = MemorySink(lambda r: (r.delta_n.astype(np.float32), dict(r.metadata)))
+    keep = MemorySink(lambda r: (r.delta_n.astype(np.float32), dict(r.solution.report)))
     report = Pipeline(job, reconstructor=rec).run(frames, keep, progress=True, warm_start=warm)
     out = []
     for t, timing in enumerate(report.timings):

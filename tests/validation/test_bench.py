@@ -93,3 +93,37 @@ def test_cli_bench_quick_json(tmp_path, capsys):
     t = report["targets"]
     assert t["max_rel_diff"] < 1e-3 and t["peak_memory_ok"]
     assert report["stages"]["reference_sensor"]["canvas"] == [2048, 2448]
+
+
+def test_series_rows_of_the_warm_started_method(data):
+    """The bench's tv series rows: every frame written, the warm-started run reports the same
+    streamed frames, and the report's series table names each row."""
+    from napari_ssdpc.validation.bench_stages import series_stage
+
+    optics, cal, flat, frames, white = data
+    case = Case("synthetic", optics, None, frames[:3], flat, white, None)
+    cfg = {"z": (-20.0, 20.0), "dz": 10.0, "method": "tv", "tv": {"iterations": 6, "warm_iterations": 2}}
+    rows = {warm: series_stage(case, cal, cfg, "cpu", 3, stacks=False, warm_start=warm) for warm in (False, True)}
+    for row in rows.values():
+        assert row["frames"] == 3 and row["steady_frames_per_s"] > 0 and row["reconstruct_s"] > 0
+    report = {
+        "machine": {
+            "cpu": "x",
+            "cores": 2,
+            "memory_gb": 1,
+            "python": "3",
+            "numpy": "2",
+            "scipy": "1",
+            "load_average": 0,
+        },
+        "case": {"condenser_na": 0.25, "z": [-20, 20], "dz": 10, "planes": 5, "rl": {"iterations": 1}},
+        "device": "cpu",
+        "quick": True,
+        "stages": {"series_tv_cold": rows[False], "series_tv_warm": rows[True], "series_wotf": rows[False]},
+    }
+    report["case"].update(method="tv", lit_lenslets=4, view_shape=[145, 145])
+    from napari_ssdpc.validation.bench import _targets
+
+    report["targets"] = _targets(report)
+    text = format_report(report)
+    assert "tv warm-started, NA 0.25, moving sample" in text and "tv warm-started" in text.splitlines()[-1]

@@ -263,6 +263,8 @@ def cmd_reconstruct(args):
     distributed = args.workers is not None or args.scheduler is not None
     if distributed and not is_zarr:
         raise SsdpcError("--workers/--scheduler spread the frames of a time series; write it to OME-Zarr (-o OUT.zarr)")
+    if getattr(args, "store_digits", None) is not None and not is_zarr:
+        raise SsdpcError("--store-digits sets how a series store keeps its values; give -o OUT.zarr, or leave it out")
     follow = getattr(args, "follow", False)
     if follow and (distributed or not is_zarr):
         raise SsdpcError("--follow writes the frames one after the other into a store: give -o OUT.zarr, no --workers")

@@ -104,6 +104,12 @@ def add_reconstruction_options(parser: argparse.ArgumentParser) -> None:
         help="region the 'multislice' model covers, µm from the optical axis (default: around the objects)",
     )
     parser.add_argument("--save", help=f"extra outputs, comma separated: {','.join(SAVE_CHOICES)}")
+    parser.add_argument(
+        "--store-digits",
+        type=int,
+        metavar="N",
+        help=f"{OutputSettings.model_fields['store_digits'].description} (OUT.zarr only)",
+    )
 
 
 def run_config(args: argparse.Namespace, optics: Optics | None, fallback: Optics | None = None) -> RunConfig:
@@ -143,6 +149,9 @@ def run_config(args: argparse.Namespace, optics: Optics | None, fallback: Optics
     if getattr(args, "roi", None) is not None:
         data["multislice"] = {**data["multislice"], "roi_um": [float(v) for v in args.roi]}
     rec = ReconstructionSettings.from_dict(data, source="command line")
-    save = getattr(args, "save", None)
-    outputs = cfg.outputs if save is None else OutputSettings.from_dict({"save": save}, source="--save")
+    outputs = cfg.outputs
+    changes = {k: getattr(args, k, None) for k in ("save", "store_digits")}
+    if any(v is not None for v in changes.values()):
+        data = {**outputs.to_dict(), **{k: v for k, v in changes.items() if v is not None}}
+        outputs = OutputSettings.from_dict(data, source="command line")
     return RunConfig(optics=optics or cfg.optics, reconstruction=rec, outputs=outputs)

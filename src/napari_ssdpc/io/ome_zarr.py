@@ -89,6 +89,7 @@ def create_ome_zarr(
     dtype="float32",
     overwrite=False,
     origin_um=None,
+    digits=None,
 ):
     """Create (or open for appending) the image group ``path/name`` of an OME-Zarr store.
 
@@ -113,6 +114,9 @@ def create_ome_zarr(
         Replace an existing group of that name.
     origin_um : sequence of float, optional
         (z, y, x) position of voxel 0, µm (the NGFF translation).
+    digits : int, optional
+        Decimal digits kept of every value (numcodecs ``Quantize``, then zstd with bit shuffle):
+        the error is below 10^-digits and the chunks compress several-fold. None: exact.
 
     Returns
     -------
@@ -135,10 +139,24 @@ def create_ome_zarr(
     grp.attrs["napari_ssdpc"] = {"software": SOFTWARE, **(attrs or {})}  # how readers know our images
     spatial = sum(a in "ZYX" for a in axes.upper())
     chunks = chunks or ((1,) * (len(shape) - spatial) + tuple(shape[-spatial:]))
-    arr = grp.create_array("0", shape=tuple(shape), chunks=tuple(chunks), dtype=dtype, fill_value=np.nan)
+    arr = grp.create_array(
+        "0", shape=tuple(shape), chunks=tuple(chunks), dtype=dtype, fill_value=np.nan, **_codecs(digits, dtype)
+    )
     if name == "ri":
         link_root_image(root, name)
     return arr
+
+
+def _codecs(digits, dtype) -> dict:
+    """Filters and compressors of an image: exact (zarr's defaults), or quantised to ``digits``."""
+    if digits is None:
+        return {}
+    import numcodecs
+
+    return {
+        "filters": [numcodecs.Quantize(digits=int(digits), dtype=np.dtype(dtype).str)],
+        "compressors": [numcodecs.Blosc(cname="zstd", clevel=5, shuffle=numcodecs.Blosc.BITSHUFFLE)],
+    }
 
 
 def read_ome_zarr(path, name: str = "ri"):

@@ -133,7 +133,7 @@ def _check_resume(out: Path, old: dict, stamp: dict) -> None:
         )
 
 
-def _create(out: Path, n_frames, layout, voxel, stamp: dict, attrs: dict, origin_um=None) -> None:
+def _create(out: Path, n_frames, layout, voxel, stamp: dict, attrs: dict, origin_um=None, digits=None) -> None:
     """Build the complete empty store in a hidden folder and rename it into place."""
     import zarr
 
@@ -157,6 +157,7 @@ def _create(out: Path, n_frames, layout, voxel, stamp: dict, attrs: dict, origin
                 voxel,
                 attrs={**attrs, "quantity": what},
                 origin_um=origin_um,
+                digits=digits,
             )
         root.create_array(DONE, shape=(n_frames,), chunks=(1,), dtype="uint8", fill_value=0)
         if out.exists():  # an empty folder, or one left by a killed creation
@@ -169,7 +170,7 @@ def _create(out: Path, n_frames, layout, voxel, stamp: dict, attrs: dict, origin
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def open_store(out, n_frames: int, layout: dict, voxel, stamp: dict, attrs: dict, origin_um=None):
+def open_store(out, n_frames: int, layout: dict, voxel, stamp: dict, attrs: dict, origin_um=None, digits=None):
     """Create the store, or reopen it to resume the same job. Returns the done-flags array.
 
     Parameters
@@ -188,6 +189,8 @@ def open_store(out, n_frames: int, layout: dict, voxel, stamp: dict, attrs: dict
         Metadata stored with every image group.
     origin_um : tuple of float, optional
         (z, y, x) position of voxel 0, µm: the NGFF translation of every image.
+    digits : int, optional
+        Decimal digits a new store keeps of every value (see ``create_ome_zarr``); None: exact.
 
     Returns
     -------
@@ -205,15 +208,16 @@ def open_store(out, n_frames: int, layout: dict, voxel, stamp: dict, attrs: dict
     if old is None:
         if out.exists() and any(out.iterdir()) and not _killed_creation(out):
             raise SsdpcError(f"{out} exists and was not written by `ssdpc reconstruct`; choose a new output path")
-        _create(out, n_frames, layout, voxel, stamp, attrs, origin_um)
+        _create(out, n_frames, layout, voxel, stamp, attrs, origin_um, digits)
     else:
         _check_resume(out, old, stamp)
     root = zarr.open_group(str(out), mode="r+", zarr_format=2)
     try:
         for name, (shape, axes, _) in layout.items():
             if not (name in root and "0" in root[name]):  # a store of an older version, half made
+                shape_t = (n_frames,) + tuple(shape)
                 create_ome_zarr(
-                    out, name, (n_frames,) + tuple(shape), "T" + axes, voxel, overwrite=True, origin_um=origin_um
+                    out, name, shape_t, "T" + axes, voxel, overwrite=True, origin_um=origin_um, digits=digits
                 )
         if DONE not in root:
             root.create_array(DONE, shape=(n_frames,), chunks=(1,), dtype="uint8", fill_value=0)

@@ -236,10 +236,12 @@ class ZarrSink(Sink):
             "frame_shape": list(source.frame_shape),
             "recipe": job.result_key,
             "outputs": sorted(layout),
+            "store_digits": job.config.outputs.store_digits,
         }
         self._lock = StoreLock(self.out).__enter__()  # one writer per store
         attrs = {**self.meta, "settings": grid.settings}
-        done = open_store(self.out, n, layout, grid.voxel_um, stamp, attrs, grid.origin_um)
+        digits = job.config.outputs.store_digits
+        done = open_store(self.out, n, layout, grid.voxel_um, stamp, attrs, grid.origin_um, digits)
         self._length = int(done.shape[0])
         return set(np.flatnonzero(done[:] == 1).tolist())
 

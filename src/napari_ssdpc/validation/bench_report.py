@@ -92,8 +92,17 @@ def format_report(report) -> str:
             rows,
         )
     )
-    if "series" in st:
-        s = st["series"]
+    series = [
+        (key, label)
+        for key, label in (
+            ("series", "serial, OME-Zarr, standard case"),
+            ("series_wotf", f"wotf, NA {TV_NA:g}, moving sample"),
+            ("series_tv_cold", f"tv cold, NA {TV_NA:g}, moving sample"),
+            ("series_tv_warm", f"tv warm-started, NA {TV_NA:g}, moving sample"),
+        )
+        if key in st
+    ]
+    if series:
         lines += [
             "",
             _table(
@@ -106,18 +115,21 @@ def format_report(report) -> str:
                     "read s/frame",
                     "reconstruct s/frame",
                     "write s/frame",
+                    "peak RSS GB",
                 ],
                 [
                     [
-                        "serial, OME-Zarr",
-                        s["frames"],
-                        _f(s["build_s"], 1),
-                        _f(s["frames_per_s"], 3),
-                        _f(s["steady_frames_per_s"], 3),
-                        _f(s["read_s"], 3),
-                        _f(s["reconstruct_s"]),
-                        _f(s["write_s"], 3),
+                        label,
+                        st[key]["frames"],
+                        _f(st[key]["build_s"], 1),
+                        _f(st[key]["frames_per_s"], 3),
+                        _f(st[key]["steady_frames_per_s"], 3),
+                        _f(st[key]["read_s"], 3),
+                        _f(st[key]["reconstruct_s"]),
+                        _f(st[key]["write_s"], 3),
+                        _f(st[key]["peak_rss_mb"] / 1024),
                     ]
+                    for key, label in series
                 ],
             ),
         ]
@@ -185,6 +197,11 @@ def format_report(report) -> str:
         lines[-1] += (
             f"; tv {t['tv_frame_s']:.1f} s a frame at NA {TV_NA:g} (<= 10: {t['tv_frame_ok']}), "
             f"{its['iterations']} iterations of {its['iteration_s']:.2f} s"
+        )
+    if "tv_warm_frame_ok" in t:
+        lines[-1] += (
+            f"; tv warm-started {t['tv_warm_frame_s']:.2f} s a frame (<= 2: {t['tv_warm_frame_ok']}); "
+            f"wotf series {t['wotf_series_fps']:.1f} frames/s (>= 10: {t['wotf_series_ok']})"
         )
     if "multislice_frame_ok" in t:
         ms = st["multislice_case"]
