@@ -9,6 +9,7 @@ import hashlib
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -169,20 +170,76 @@ def test_a_foreign_folder_or_file_is_refused_untouched(setup, tmp_path):
     assert afile.read_bytes() == b"a file"
 
 
+_HOLD = """
+import sys, time
+from napari_ssdpc.io.store import StoreLock
+with StoreLock(sys.argv[1]):
+    print("held", flush=True)
+    time.sleep(60)
+"""
+
+
 def test_one_writer_per_store_and_a_stale_lock_is_taken_over(setup, tmp_path):
     recipe, frames = setup
     out = tmp_path / "s.zarr"
     lock = tmp_path / ".s.zarr.lock"
-    lock.write_text(str(os.getppid()))  # a live writer
-    with pytest.raises(SsdpcError, match=f"being written by process {os.getppid()}"):
-        run(recipe, frames, out)
-    assert not out.exists()
-    lock.write_text(str(dead_pid()))  # a writer that was killed
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    holder = subprocess.Popen([sys.executable, "-c", _HOLD, str(out)], stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        assert holder.stdout.readline().strip() == "held"  # a live writer
+        with pytest.raises(SsdpcError, match=f"being written by process {holder.pid}"):
+            run(recipe, frames, out)
+        assert not out.exists()
+    finally:
+        holder.kill()
+        holder.wait()
+    assert lock.read_text() == str(holder.pid)  # left by a killed writer: taken over
     run(recipe, frames, out)
     assert list(done_frames(out)) == [0, 1, 2] and not lock.exists()
-    with StoreLock(out):
-        assert lock.read_text() == str(os.getpid())
-    assert not lock.exists()
+    for stale in ("", str(dead_pid()), str(os.getppid()), "garbage"):  # no OS lock held: free
+        lock.write_text(stale)
+        with StoreLock(out):
+            assert lock.read_text() == str(os.getpid())
+            with pytest.raises(SsdpcError, match="being written by"):  # a second writer, even in this process
+                StoreLock(out).__enter__()
+        assert not lock.exists()
+
+
+def _race(out, k, rounds, barrier, held, stale):
+    """One of several processes: each round, all try to take the store's lock at once."""
+    for r in range(rounds):
+        if k == 0:  # a stale lock left for the round: empty, a dead writer's PID, or garbage
+            Path(f"{out.parent}/.{out.name}.lock").write_text(stale[r % len(stale)])
+        barrier.wait()
+        lock = StoreLock(out)
+        try:
+            lock.__enter__()
+            with held.get_lock():
+                held[r] += 1
+            mine = True
+        except SsdpcError:
+            mine = False
+        barrier.wait()  # everyone has tried while the holder still holds it
+        if mine:
+            lock.__exit__(None, None, None)
+        barrier.wait()
+
+
+def test_exactly_one_of_many_processes_racing_for_a_stale_lock_holds_it(tmp_path):
+    import multiprocessing as mp
+
+    ctx = mp.get_context("fork")
+    n, rounds = 5, 40
+    barrier, held = ctx.Barrier(n), ctx.Array("i", rounds)
+    stale = ["", str(dead_pid()), "12x", ""]
+    out = tmp_path / "s.zarr"
+    procs = [ctx.Process(target=_race, args=(out, k, rounds, barrier, held, stale)) for k in range(n)]
+    for p in procs:
+        p.start()
+    for p in procs:
+        p.join(60)
+    assert [p.exitcode for p in procs] == [0] * n
+    assert list(held) == [1] * rounds
 
 
 def test_the_reader_shows_frames_not_marked_done_as_nan(setup, tmp_path):

@@ -6,8 +6,8 @@
 - The stamp names what the store holds: the input's identity (path, size, modification time
   and SHA-256 of its content), the frame count and shape, the recipe and the outputs. A rerun
   resumes only the same job, and refuses a changed input naming both recordings.
-- One writer at a time: ``.OUT.lock`` beside the store holds the writer's PID; a lock left by a
-  process that no longer runs is taken over.
+- One writer at a time: the writer holds an OS lock (``flock``) on ``.OUT.lock`` beside the store,
+  released by the system when the process ends; a lock file left by a killed writer is taken over.
 - A frame is complete when its byte in ``ssdpc_done`` is 1 (set after all its chunks);
   :func:`read_complete` shows the other frames as NaN.
 - A folder that is not a store of ours is refused before anything is written into it.
@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime
+import errno
 import os
 import shutil
 from pathlib import Path
@@ -44,7 +45,14 @@ _METADATA = {".zgroup", ".zattrs", ".zarray", "zarr.json"}
 
 
 class StoreLock:
-    """``.OUT.lock`` beside a store, holding the writer's PID; a context manager.
+    """``.OUT.lock`` beside a store: one writer at a time, held by an OS lock; a context manager.
+
+    The writer holds an exclusive ``flock`` on the lock file (``msvcrt.locking`` on Windows) for as
+    long as it writes; the operating system releases it when the process ends, however it ends.
+    Who holds the store is decided by that lock alone: the PID written into the file is only for
+    the message, so an empty file (a writer between taking the lock and writing its PID) or a file
+    left by a killed writer never reads as a free or a dead owner. After taking the lock, the file
+    must still be the one at the path (a writer that finished removes it while holding it).
 
     Parameters
     ----------
@@ -56,38 +64,81 @@ class StoreLock:
         out = Path(out)
         self.path = out.parent / f".{out.name}.lock"
         self.out = out
+        self._fd: int | None = None
 
     def __enter__(self) -> StoreLock:
-        for _ in range(3):
+        if self._fd is not None:
+            raise SsdpcError(f"{self.out}: this lock is held already; release it before taking it again")
+        for _ in range(20):
             try:
-                fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-            except FileExistsError:
-                pid = self._owner()
-                if pid is not None and pid != os.getpid() and pid_alive(pid):
-                    raise SsdpcError(
-                        f"{self.out} is being written by process {pid}; wait for it to finish, or stop it "
-                        "and rerun to resume"
-                    ) from None
-                with contextlib.suppress(FileNotFoundError):  # a stale lock of a dead process: take it over
-                    self.path.unlink()
-                continue
+                fd = os.open(self.path, os.O_CREAT | os.O_RDWR, 0o644)
             except OSError as e:
                 raise os_error(e, self.out, "locking") from None
-            with os.fdopen(fd, "w") as f:
-                f.write(str(os.getpid()))
+            try:
+                held = _try_lock(fd)
+            except OSError as e:  # a file system without locks
+                os.close(fd)
+                raise os_error(e, self.out, "locking") from None
+            if not held:
+                os.close(fd)
+                pid = self._owner()
+                who = f"process {pid}" if pid and pid != os.getpid() else "another process"
+                raise SsdpcError(
+                    f"{self.out} is being written by {who}; wait for it to finish, or stop it and rerun to resume"
+                )
+            try:
+                same = os.fstat(fd).st_ino == os.stat(self.path).st_ino
+            except FileNotFoundError:
+                same = False
+            if not same:  # the previous writer removed the file we locked: lock the new one
+                os.close(fd)
+                continue
+            try:
+                os.ftruncate(fd, 0)
+                os.write(fd, str(os.getpid()).encode())
+            except OSError as e:
+                os.close(fd)
+                raise os_error(e, self.out, "locking") from None
+            self._fd = fd
             return self
         raise SsdpcError(f"{self.out}: cannot take the lock {self.path}; remove it if no run is writing the store")
 
     def _owner(self) -> int | None:
         try:
-            return int(self.path.read_text().strip() or 0)
+            return int(self.path.read_text().strip() or 0) or None
         except (OSError, ValueError):
             return None
 
     def __exit__(self, *exc) -> None:
-        if self._owner() == os.getpid():
-            with contextlib.suppress(OSError):
-                self.path.unlink()
+        if self._fd is None:
+            return
+        with contextlib.suppress(OSError):  # removed while held: no one can lock this file any more
+            self.path.unlink()
+        os.close(self._fd)  # releases the OS lock
+        self._fd = None
+
+
+def _try_lock(fd: int) -> bool:
+    """Take an exclusive OS lock on an open file without waiting; False where another holds it."""
+    try:
+        import fcntl
+    except ImportError:  # Windows
+        import msvcrt
+
+        try:
+            msvcrt.locking(fd, msvcrt.LK_NBLCK, 1)  # type: ignore[attr-defined]
+        except OSError:
+            return False
+        return True
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    except OSError as e:
+        if e.errno in (errno.EAGAIN, errno.EACCES):
+            return False
+        raise
+    return True
 
 
 def _describe_input(ident) -> str:

@@ -241,7 +241,11 @@ class ZarrSink(Sink):
         self._lock = StoreLock(self.out).__enter__()  # one writer per store
         attrs = {**self.meta, "settings": grid.settings}
         digits = job.config.outputs.store_digits
-        done = open_store(self.out, n, layout, grid.voxel_um, stamp, attrs, grid.origin_um, digits)
+        try:
+            done = open_store(self.out, n, layout, grid.voxel_um, stamp, attrs, grid.origin_um, digits)
+        except BaseException:  # refused or failed: the store is not written, the lock not kept
+            self._close()
+            raise
         self._length = int(done.shape[0])
         return set(np.flatnonzero(done[:] == 1).tolist())
 
