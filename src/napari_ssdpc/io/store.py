@@ -31,6 +31,7 @@ __all__ = [
     "DONE",
     "STAMP",
     "StoreLock",
+    "check_input_unchanged",
     "done_frames",
     "grow_store",
     "mask_incomplete",
@@ -264,6 +265,8 @@ def open_store(out, n_frames: int, layout: dict, voxel, stamp: dict, attrs: dict
         _check_resume(out, old, stamp)
     root = zarr.open_group(str(out), mode="r+", zarr_format=2)
     try:
+        if old is not None and old.get("input") != stamp["input"]:  # the same content, touched or copied
+            root.attrs[STAMP] = {**old, "input": stamp["input"]}  # the size and time each frame is checked against
         for name, (shape, axes, _) in layout.items():
             if not (name in root and "0" in root[name]):  # a store of an older version, half made
                 shape_t = (n_frames,) + tuple(shape)
@@ -305,10 +308,63 @@ def write_frame(out, t: int, images: dict) -> float:
         root = zarr.open_group(str(out), mode="r+")
         for name, (data, _, _) in images.items():
             root[name]["0"][t] = data
+        check_input_unchanged(root.attrs.get(STAMP), t)
         root[DONE][t] = 1  # only after every chunk of the frame is on disk
     except OSError as e:
         raise os_error(e, Path(out)) from None
     return time.perf_counter() - t0
+
+
+def _size_and_mtime(path: Path) -> tuple[int, int]:
+    """Bytes and latest modification (ns) of a file, or of all the files of a folder (a store)."""
+    files = [p for p in path.rglob("*") if p.is_file()] if path.is_dir() else [path]
+    size = mtime = 0
+    for p in files:
+        st = p.stat()
+        size, mtime = size + st.st_size, max(mtime, st.st_mtime_ns)
+    return size, mtime
+
+
+def check_input_unchanged(stamp, t: int) -> None:
+    """Refuse to mark frame ``t`` done when the store's input file changed since the run began.
+
+    Cheap: the file's size and modification time against the stamp's (its SHA-256 is taken once,
+    when the store is opened). A file rewritten in place during a run (``cp other.tif series.tif``)
+    would otherwise give a store whose later frames come from another recording than its stamp
+    names. Inputs that are not files (arrays) are not checked.
+
+    Parameters
+    ----------
+    stamp : dict or None
+        The store's stamp (:data:`STAMP`); its ``input`` holds path, size and mtime_ns.
+    t : int
+        The frame about to be marked done.
+
+    Raises
+    ------
+    SsdpcError
+        The input is gone, or its size or modification time changed.
+    """
+    ident = stamp.get("input") if isinstance(stamp, dict) else None
+    if not isinstance(ident, dict) or ident.get("size") is None or not ident.get("mtime_ns"):
+        return
+    path = Path(str(ident.get("path")))
+    try:
+        size, mtime = _size_and_mtime(path)
+    except OSError:
+        size, mtime = -1, 0
+    if (size, mtime) == (ident["size"], ident["mtime_ns"]):
+        return
+    now = "is gone" if size < 0 else f"is now {size} bytes, modified {_when(mtime)}"
+    raise SsdpcError(
+        f"{path} changed during the run (it was {ident['size']} bytes, modified {_when(ident['mtime_ns'])}; it {now}): "
+        f"frame {t} was not marked done, the frames before it are of the recording the store names; restore the "
+        "file and rerun to resume, or reconstruct the new recording into a new output path"
+    )
+
+
+def _when(mtime_ns: int) -> str:
+    return datetime.datetime.fromtimestamp(mtime_ns / 1e9).isoformat(timespec="milliseconds")
 
 
 def done_frames(out) -> np.ndarray:
