@@ -115,10 +115,13 @@ def _model_at(model: type[BaseModel], loc: tuple) -> type[BaseModel] | None:
     return model
 
 
+_UNITS = {"um", "mm", "nm", "px", "deg", "s", "ms", "rad", "pg"}
+
+
 def _nearest(key: str, candidates: list[str]) -> str:
     stem = key.rsplit("_", 1)[0]
     for c in candidates:
-        if c != key and c.rsplit("_", 1)[0] == stem:
+        if c != key and c.rsplit("_", 1)[0] == stem and c.rsplit("_", 1)[-1] in _UNITS:
             return f" (expected '{c}': lengths carry their unit in the key)"
     close = difflib.get_close_matches(key, candidates, n=1, cutoff=0.5)
     if close:
@@ -127,6 +130,22 @@ def _nearest(key: str, candidates: list[str]) -> str:
 
 
 _KIND = {"float": "a number", "int": "a whole number", "bool": "true or false", "string": "text"}
+
+
+def _misspelling(errors: list) -> dict | None:
+    """The unknown key of a misspelt required key (``wavelenght_um`` for ``wavelength_um``): pydantic
+    reports the required key missing first, but the unknown one names what the user wrote."""
+    missing = {tuple(e["loc"]) for e in errors if e["type"] == "missing"}
+    for e in errors:
+        loc = tuple(e["loc"])
+        if e["type"] == "extra_forbidden" and loc:
+            stem, unit = str(loc[-1]).rsplit("_", 1) if "_" in str(loc[-1]) else (str(loc[-1]), "")
+            if unit in _UNITS and any(str(m[-1]).rsplit("_", 1)[0] == stem for m in missing):
+                continue  # another unit of the same key: the missing key's message says to convert
+            near = [str(m[-1]) for m in missing if m[:-1] == loc[:-1]]
+            if difflib.get_close_matches(str(loc[-1]), near, n=1, cutoff=0.6):
+                return e
+    return None
 
 
 def one_line(error: ValidationError, model: type[BaseModel], source: str) -> str:
@@ -147,7 +166,8 @@ def one_line(error: ValidationError, model: type[BaseModel], source: str) -> str
         ``"SOURCE: key: what is wrong; the fix"`` on one line.
     """
     errors = error.errors()
-    first = errors[0]
+    misspelt = _misspelling(errors)
+    first = misspelt or errors[0]
     loc = tuple(p for p in first["loc"] if not (isinstance(p, str) and p.startswith("function-")))
     key = ".".join(str(p) for p in loc)
     value = first.get("input")
@@ -184,5 +204,6 @@ def one_line(error: ValidationError, model: type[BaseModel], source: str) -> str
         msg = str(first["ctx"]["error"]) if "ctx" in first else first["msg"]
     else:
         msg = f"'{key}': {first['msg']}, got {value!r}"
-    more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+    others = len(errors) - 1 - (misspelt is not None)  # a misspelling is also reported as the key missing
+    more = f" (and {others} more)" if others > 0 else ""
     return f"{source}: {msg}{more}"
