@@ -142,7 +142,7 @@ def test_7_a_calibration_for_other_optics_or_edited_is_refused(synthetic_series,
     other = tmp_path / "40x.yaml"
     other.write_text(json.dumps(d))
     rc, err = cli(rec_args(tmp_path / "o.ome.tif", "--optics", other))
-    assert rc == 2 and "disagree on the objective magnification (40x vs 20x)" in err
+    assert rc == 2 and "objective magnification (objective.magnification: 40x vs 20x in the calibration)" in err
     cal = json.loads((files / "cal.json").read_text())
     cal["grid"]["pitch_px"] *= 1.1
     cal["pitch_px"] *= 1.1

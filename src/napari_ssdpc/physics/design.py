@@ -71,6 +71,7 @@ def design(optics: Optics) -> dict:
         "dof_full_um": 2 * dof_fwhm,
         "dof_pitch_um": dof_pitch,
         "dof_um": min(2 * dof_fwhm, dof_pitch),
+        "medium_index": optics.medium_index,
         "m_ei": optics.m_ei,
         "object_pixel_um": optics.object_pixel_um,
         "f_obj_um": f_obj,
@@ -140,6 +141,7 @@ def design_table(optics: Optics, short: bool = False) -> str:
     if short:
         return "\n".join([*_short_lines(d), *("⚠ " + w for w in design_warnings(optics))])
     rows = [
+        ("Medium index n_medium (RI = n_medium + Δn)", f"{optics.medium_index:.4f}", ""),
         ("Elemental-image magnification M_EI", f"{d['m_ei']:.4g}", "x"),
         ("Object pixel size", f"{d['object_pixel_um']:.4f}", "µm"),
         ("Lenslet pitch on sensor", f"{d['pitch_px']:.2f}", "px"),
@@ -188,6 +190,7 @@ def _short_lines(d: dict) -> list[str]:
         f"lenslets: {d['lenslets_in_pupil']} in the pupil, {d['lenslets_usable']} usable (≥ 50 % inside)",
         f"source disk: {d['lenslets_inside']} inside, {d['lenslets_straddling']} straddling, "
         f"{d['lenslets_outside']} outside",
+        f"medium index {d['medium_index']:.4f} (RI = medium + Δn)",
         f"σ {d['sigma']:.2f} · M_EI {d['m_ei']:.3f} · object pixel {d['object_pixel_um']:.4f} µm",
         f"pitch {d['pitch_px']:.2f} px · EI radius {d['ei_radius_px']:.2f} px",
         f"expected axial FWHM {d['expected_axial_fwhm_um']:.1f} µm from the {d['lenslets_straddling']} "

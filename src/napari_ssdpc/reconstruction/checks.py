@@ -3,8 +3,9 @@
 The :class:`~napari_ssdpc.reconstruction.reconstructor.Reconstructor` runs them for the CLI,
 napari, the series runner and the Python API alike:
 
-- :func:`check_optics_match`: the optics in use against the calibration's (magnification,
-  pitch, pixel size, wavelength) and against the lattice pitch measured on the white frame.
+- :func:`check_optics_match`: the optics in use against the calibration's (every field that
+  changes the numbers: :data:`OPTICS_FIELDS`) and against the lattice pitch measured on the
+  white frame.
 - :func:`check_memory`: an estimate of the operators and outputs against the free memory.
 - :func:`check_flat` and :func:`check_frame_light`: a flat or raw frame without light, all
   saturated, inverted, noise only or white (condenser open) is refused with what is wrong;
@@ -22,9 +23,11 @@ import numpy as np
 from napari_ssdpc.calibration.saturation import FULL_SCALE_CODES
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.reconstruction import consistency
+from napari_ssdpc.settings.parts import PART_KEYS
 
 __all__ = [
     "MAX_DELTA_N",
+    "OPTICS_FIELDS",
     "available_memory",
     "check_constant",
     "check_flat",
@@ -39,6 +42,26 @@ __all__ = [
 
 #: |Δn| beyond this is no biological or polymer sample in any medium: a wrong input or setting.
 MAX_DELTA_N = 0.5
+
+
+#: Every optics field that changes the numbers, as (what, attribute, unit, largest relative
+#: difference; None: must be equal). The condenser NA is left out: it is measured on every frame
+#: and flat (:mod:`.consistency`), and a calibration on a white frame may name another; the field
+#: stop (``iris_radius_um``) too: the calibration measures the elemental images' radius itself.
+OPTICS_FIELDS = (
+    ("objective magnification", "magnification", "x", 0.01),
+    ("objective NA", "na", "", 0.01),
+    ("tube-lens focal length", "tube_lens_mm", " mm", 0.01),
+    ("Fourier-lens focal length", "fourier_lens_mm", " mm", 0.01),
+    ("MLA pitch", "pitch_um", " µm", 0.01),
+    ("MLA focal length", "mla_focal_length_mm", " mm", 0.01),
+    ("lenslet radius", "lenslet_radius_um", " µm", 0.01),
+    ("camera pixel size", "pixel_um", " µm", 0.01),
+    ("wavelength", "wavelength_um", " µm", 0.01),
+    ("medium index", "medium_index", "", 0.0005),  # Δn of cells is ~0.02: RI labelled 0.01 off is wrong
+    ("camera's x mirroring", "flip_x", "", None),
+    ("camera's y mirroring", "flip_y", "", None),
+)
 
 
 def check_optics_match(optics, cal, source: str = "--optics") -> None:
@@ -56,21 +79,18 @@ def check_optics_match(optics, cal, source: str = "--optics") -> None:
     Raises
     ------
     SsdpcError
-        Magnification, MLA pitch, pixel size or wavelength differ by more than 1 %, the array
-        lattice (square or hex) differs, or the measured pitch differs from the optics' by more
-        than 3 %.
+        A field of :data:`OPTICS_FIELDS` differs beyond its tolerance (1 %; the medium index
+        0.05 %; a mirroring at all), the array lattice (square or hex) differs, or the measured
+        pitch differs from the optics' by more than 3 %.
     """
-    for what, attr, unit in (
-        ("objective magnification", "magnification", "x"),
-        ("MLA pitch", "pitch_um", " µm"),
-        ("camera pixel size", "pixel_um", " µm"),
-        ("wavelength", "wavelength_um", " µm"),
-    ):
-        a, b = float(getattr(optics, attr)), float(getattr(cal.optics, attr))
-        if abs(a - b) > 0.01 * abs(b):
+    for what, attr, unit, tol in OPTICS_FIELDS:
+        a, b = getattr(optics, attr), getattr(cal.optics, attr)
+        if (a != b) if tol is None else abs(float(a) - float(b)) > tol * abs(float(b)):
+            va, vb = (str(a).lower(), str(b).lower()) if tol is None else (f"{a:g}{unit}", f"{b:g}{unit}")
             raise SsdpcError(
-                f"the optics ({source}) and the calibration disagree on the {what} ({a:g}{unit} vs {b:g}{unit}); "
-                "recalibrate with these optics (`ssdpc calibrate WHITE.tif --optics ...`) or use the matching file"
+                f"the optics ({source}) and the calibration disagree on the {what} ({_key(attr)}: {va} vs "
+                f"{vb} in the calibration); give the optics the calibration was made with, or recalibrate with "
+                "these (`ssdpc calibrate WHITE.tif --optics ...`)"
             )
     if optics.grid != cal.grid.lattice:
         raise SsdpcError(
@@ -84,6 +104,11 @@ def check_optics_match(optics, cal, source: str = "--optics") -> None:
             f"{100 * abs(measured / expected - 1):.0f}%: the calibration or its optics were edited or belong to "
             "another instrument; recalibrate on a white frame"
         )
+
+
+def _key(attr: str) -> str:
+    """The optics file's key of a flat attribute (``objective.na`` for ``na``)."""
+    return ".".join(PART_KEYS[attr]) if attr in PART_KEYS else attr
 
 
 def available_memory() -> int:

@@ -332,13 +332,15 @@ class Reconstructor:
 
     def settings(self) -> dict:
         """The settings this reconstructor solves with, for the output metadata: the reconstruction
-        settings (every section), the z grid as built, the method's own numbers, the lit lenslets."""
+        settings (every section), the z grid as built, the medium index RI is relative to, the
+        method's own numbers, the lit lenslets."""
         return {
             **self.config.reconstruction.to_dict(),
             "method": self.method.name,
             "z_min_um": float(self.z_um[0]),
             "z_max_um": float(self.z_um[-1]),
             "dz_um": self.dz,
+            "medium_index": float(self.optics.medium_index),  # RI = medium_index + Δn
             **self.method.settings(),
             "lenslets_used": [[ln.row, ln.col] for ln in self.lenslets],
         }
