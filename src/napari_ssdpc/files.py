@@ -67,7 +67,7 @@ def os_error(e: OSError, path: str | Path, doing: str = "writing") -> SsdpcError
     SsdpcError
     """
     fixes = {
-        errno.ENOSPC: "no space left on the device; free some space or write to another disk",
+        errno.ENOSPC: "disk full (no space left on the device); free some space or write to another disk",
         errno.EDQUOT: "disk quota exceeded; free some space or write to another disk",
         errno.EROFS: "the file system is read-only; choose a writable output folder",
         errno.EACCES: "permission denied; choose a folder you may write to",
@@ -78,7 +78,10 @@ def os_error(e: OSError, path: str | Path, doing: str = "writing") -> SsdpcError
         errno.EEXIST: "it already exists; choose another path",
         errno.ENAMETOOLONG: "the name is too long; choose a shorter path",
     }
-    fix = fixes.get(e.errno or 0, f"{e.strerror or e or type(e).__name__}; check the path and the disk")
+    code = e.errno
+    if code is None and re.search(r"\d+ requested and \d+ written", str(e)):  # numpy's short write: a full disk
+        code = errno.ENOSPC
+    fix = fixes.get(code or 0, f"{e.strerror or e or type(e).__name__}; check the path and the disk")
     return SsdpcError(f"{doing} {path}: {fix}")
 
 

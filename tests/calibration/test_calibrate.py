@@ -291,7 +291,7 @@ def test_json_bad_files(white, tmp_path):
     [
         lambda d: d["lenslets"][0].update(centre_px=[v + 3 for v in d["lenslets"][0]["centre_px"]]),
         lambda d: [r.update(u=[-v for v in r["u"]]) for r in d["lenslets"]],  # would flip the sign of Δn
-        lambda d: d["grid"].update(flip_x=not d["grid"]["flip_x"]),
+        lambda d: [p.update(flip_x=not p["flip_x"]) for p in (d["grid"], d["optics"])],  # the lattice with its optics
         lambda d: d.update(ei_radius_px=2 * d["ei_radius_px"]),
         lambda d: d["optics"]["objective"].update(magnification=40.0),
     ],

@@ -9,6 +9,7 @@ like a freshly computed result.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -357,8 +358,17 @@ def read_result(path):
     list of (data, kwargs, 'image')
     """
     p = Path(path)
-    if p.is_dir():
-        return _read_zarr(p)
+    try:
+        return _read_zarr(p) if p.is_dir() else _read_tiff(p)
+    except SsdpcError:
+        raise
+    except Exception as e:  # our format with damaged metadata: zarr, tifffile and JSON raise many types
+        raise SsdpcError(
+            f"{p}: a napari-ssdpc result whose metadata is damaged ({type(e).__name__}); reconstruct it again"
+        ) from None
+
+
+def _read_tiff(p: Path):
     info = tiff_info(p)
     desc, pixels = _our_description(info), (info.ome or {}).get("Pixels", {})
     data = open_lazy(p, squeeze=False)
@@ -412,6 +422,8 @@ def _origin(desc: dict, shape_zyx, voxel) -> tuple:
 def _result_layers(data, axes: str, desc: dict, voxel):
     """Split channels if any, keep (T)ZYX, and style each quantity."""
     axes = axes.upper()
+    if not (len(voxel) == 3 and all(math.isfinite(v) and v > 0 for v in voxel)):
+        raise SsdpcError(f"voxel size {voxel} µm in the metadata is not three sizes > 0; reconstruct it again")
     if data.ndim != len(axes) or any(a not in "TCZYX" for a in axes):
         raise SsdpcError(
             f"unexpected axes {axes!r} for data of shape {data.shape}; "

@@ -13,6 +13,7 @@ not at all.
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import tempfile
 from pathlib import Path
@@ -23,6 +24,7 @@ from napari_ssdpc._napari.reader import RESULT_FORMAT, RESULT_VERSION, zarr_imag
 from napari_ssdpc._version import SOFTWARE
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.frames import write_ome_tiff
+from napari_ssdpc.io.paths import is_ours
 
 
 def write_volume(path: str, data, meta: dict) -> list[str]:
@@ -42,18 +44,45 @@ def write_volume(path: str, data, meta: dict) -> list[str]:
     list of str
         The paths written.
     """
-    data = data[0] if isinstance(data, list) else data  # multiscale: the full resolution
+    meta = meta if isinstance(meta, dict) else {}
+    data = data[0] if isinstance(data, (list, tuple)) and data else data  # multiscale: the full resolution
+    name = meta.get("name") or "volume"
+    if not (hasattr(data, "ndim") and hasattr(data, "dtype")) or np.dtype(data.dtype).kind not in "uif":
+        raise SsdpcError(f"layer '{name}' holds no numeric image ({type(data).__name__}); pick a reconstruction layer")
     if data.ndim not in (3, 4):
         raise SsdpcError(
-            f"layer '{meta.get('name')}' has {data.ndim} dimensions; the ssDPC writer saves "
+            f"layer '{name}' has {data.ndim} dimensions; the ssDPC writer saves "
             "(z, y, x) volumes or (t, z, y, x) series: pick a reconstruction layer"
         )
-    info = dict((meta.get("metadata") or {}).get("ssdpc") or {})
-    scale = list(meta.get("scale") or [1.0] * data.ndim)[-3:]
-    translate = list(meta.get("translate") or [0.0] * data.ndim)[-3:]
+    metadata = meta.get("metadata") if isinstance(meta.get("metadata"), dict) else {}
+    info = dict(metadata.get("ssdpc") if isinstance(metadata.get("ssdpc"), dict) else {})
+    scale = _per_axis(meta.get("scale"), data.ndim, 1.0, "scale", name)
+    translate = _per_axis(meta.get("translate"), data.ndim, 0.0, "translate", name)
     info.setdefault("quantity", "ri")
-    info["name"] = meta.get("name", info.get("name", "volume"))
+    info["name"] = str(name)
     return [str(write_result(path, data, voxel_um=scale, origin_um=translate, info=info))]
+
+
+def _per_axis(values, ndim: int, default: float, what: str, name: str) -> list[float]:
+    """The last three (z, y, x) of a layer's per-axis ``scale`` or ``translate``, checked."""
+    if values is None:
+        return [default] * 3
+    try:
+        v = [float(x) for x in values]
+    except (TypeError, ValueError):
+        raise SsdpcError(f"layer '{name}': its {what} {values!r} is not a list of numbers; reset it") from None
+    if len(v) != ndim:
+        raise SsdpcError(f"layer '{name}': its {what} has {len(v)} values for {ndim} axes; give one per axis")
+    return v[-3:]
+
+
+def _check_grid(voxel_um, origin_um) -> None:
+    """Voxel sizes finite and > 0 µm, an origin of three finite numbers."""
+    vox, org = np.asarray(voxel_um, float).ravel(), np.asarray(origin_um, float).ravel()
+    if vox.size != 3 or not (np.isfinite(vox).all() and (vox > 0).all()):
+        raise SsdpcError(f"voxel size {list(voxel_um)} µm: give three finite sizes > 0 (dz, dy, dx), µm")
+    if org.size != 3 or not np.isfinite(org).all():
+        raise SsdpcError(f"origin {list(origin_um)} µm: give three finite numbers (z, y, x), µm")
 
 
 def write_result(path, data, *, voxel_um, origin_um=(0.0, 0.0, 0.0), info: dict | None = None) -> Path:
@@ -75,11 +104,19 @@ def write_result(path, data, *, voxel_um, origin_um=(0.0, 0.0, 0.0), info: dict 
     Path
     """
     path = Path(path)
+    if not (hasattr(data, "ndim") and hasattr(data, "dtype")) or np.dtype(data.dtype).kind not in "uif":
+        raise SsdpcError(f"{path.name}: no numeric image to write ({type(data).__name__}); give a (z, y, x) array")
+    _check_grid(voxel_um, origin_um)
     desc = _description(info, voxel_um, origin_um)
+    q = str(desc.get("quantity", "ri"))
+    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_ -]{0,63}", q):  # a group name in the store: no '/', no '..'
+        raise SsdpcError(f"quantity name {q!r}: use letters, digits and '_' only (e.g. 'ri', 'phase')")
     if path.suffix.lower() == ".zarr":
-        return write_ome_zarr(path, data, name=desc["quantity"], voxel_um=voxel_um, origin_um=origin_um, attrs=desc)
+        return write_ome_zarr(path, data, name=q, voxel_um=voxel_um, origin_um=origin_um, attrs=desc)
     if not path.name.lower().endswith((".ome.tif", ".ome.tiff")):
         raise SsdpcError(f"{path.name}: save results as NAME.ome.tif (a volume) or NAME.zarr (a time series)")
+    if path.exists() and not is_ours(path):
+        raise SsdpcError(f"{path} is a file napari-ssdpc did not write; save the layer under a new name")
     axes = "TZYX" if np.ndim(data) == 4 else "ZYX"
     return write_ome_tiff(path, np.asarray(data, np.float32), axes=axes, voxel_um=voxel_um, description=desc)
 
@@ -106,7 +143,9 @@ def _jsonable(obj):
         return obj.tolist()
     if isinstance(obj, np.generic):
         return obj.item()
-    return obj
+    if obj is None or isinstance(obj, (str, int, float, bool)):
+        return obj
+    return str(obj)  # anything else a layer's metadata may hold, by its name
 
 
 def write_ome_zarr(path, data, *, name: str, voxel_um, origin_um=(0.0, 0.0, 0.0), attrs: dict | None = None) -> Path:

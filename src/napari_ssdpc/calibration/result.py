@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -278,7 +279,50 @@ class Calibration:
                 "match its content); re-run `ssdpc calibrate`, or accept a deliberate edit with "
                 "`ssdpc resign-calibration FILE`"
             )
+        cal.check_values(source)
         return cal
+
+    def check_values(self, source: str = "calibration") -> None:
+        """Refuse values no measurement gives: no lenslets, a pitch, radius or centre that is not a
+        finite number in range, a lattice mirrored unlike its optics.
+
+        Parameters
+        ----------
+        source : str
+            How messages name the calibration.
+
+        Raises
+        ------
+        SsdpcError
+            The first impossible value, with the key that holds it.
+        """
+        h, w = (int(v) for v in self.frame_shape)
+        g = self.grid
+        lens = self.lenslets
+        tables = {
+            "centre_px": np.asarray(self.centres_px, float).reshape(-1, 2),
+            "u": np.array([ln.u for ln in lens], float).reshape(-1, 2),
+            "a_um": np.array([ln.a_um for ln in lens], float).reshape(-1, 2),
+        }
+        problems = [
+            (min(h, w) < 16, "frame_shape", self.frame_shape, "two frame sizes of at least 16 px"),
+            (not lens, "lenslets", "[]", "one row per lenslet in the pupil"),
+            (not 0 < g.pitch_px < max(h, w), "grid.pitch_px", g.pitch_px, "a finite pitch in px, within the frame"),
+            (not 0 < self.ei_radius_px < max(h, w), "ei_radius_px", self.ei_radius_px, "a finite radius in px"),
+            (not np.isfinite([*g.axis_px, *g.vertex_px, g.rotation_deg]).all(), "grid", g.axis_px, "finite numbers"),
+            ((g.flip_x, g.flip_y) != (self.optics.flip_x, self.optics.flip_y), "grid.flip_x", g.flip_x, "its optics'"),
+            (len(self.centres_px) != len(lens), "lenslets", len(lens), "one centre_px per lenslet"),
+        ]
+        for key, a in tables.items():
+            problems.append((not np.isfinite(a).all(), f"lenslets[].{key}", "NaN or inf", "finite numbers"))
+        fr = np.array([ln.fraction for ln in lens], float)
+        problems.append((not ((fr >= 0) & (fr <= 1)).all(), "lenslets[].fraction", "outside 0 to 1", "0 to 1"))
+        for bad, key, value, want in problems:
+            if bad:
+                raise SsdpcError(
+                    f"{source}: {key} is {value}, not {want}: the file is damaged or was edited; re-run "
+                    "`ssdpc calibrate` on a white frame"
+                )
 
     def to_json(self, path) -> Path:
         """Write the versioned JSON atomically (a failure never leaves a half file).
@@ -311,6 +355,8 @@ class Calibration:
         -------
         Calibration
         """
+        if not isinstance(path, (str, os.PathLike)):
+            raise SsdpcError(f"give the calibration file's path, got {type(path).__name__}")
         path = Path(path)
         if not path.is_file():
             raise SsdpcError(f"calibration file not found: {path} (run `ssdpc calibrate WHITE.tif -o {path.name}`)")

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import errno
+import os
 import re
 import sys
 import warnings
@@ -188,8 +189,16 @@ def main(argv=None) -> int:
     except OSError as e:  # a file-system fault that no check foresaw (full disk, lost mount, ...)
         from napari_ssdpc.files import os_error
 
-        doing = "writing" if e.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS) else "accessing"
+        full = e.errno is None and "written" in str(e)  # numpy's short write on a full disk
+        doing = "writing" if full or e.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS) else "accessing"
         return _error(str(os_error(e, e.filename or "a file", doing)))
+    except Exception as e:  # a fault no check foresaw: still one line; SSDPC_DEBUG=1 shows the traceback
+        if os.environ.get("SSDPC_DEBUG"):
+            raise
+        return _error(
+            f"unexpected {type(e).__name__}: {str(e)[:200]}; this is a fault of napari-ssdpc, not of your input: "
+            "rerun with SSDPC_DEBUG=1 and report the traceback"
+        )
     return 0
 
 

@@ -306,7 +306,9 @@ def _white(levels, top: float, optics, name: str, fix: str) -> None:
         )
 
 
-def check_frame_light(levels, noise: float, lit, expected, optics, name: str = "frame", lenslets=None) -> None:
+def check_frame_light(
+    levels, noise: float, lit, expected, optics, name: str = "frame", lenslets=None, flat: bool = True
+) -> None:
     """Refuse a raw frame without light in the lit lenslets' views, or unlike the flat.
 
     Parameters
@@ -325,6 +327,8 @@ def check_frame_light(levels, noise: float, lit, expected, optics, name: str = "
         For the message.
     lenslets : list of Lenslet, optional
         All the calibration's lenslets: the condenser NA the frame looks lit at is checked too.
+    flat : bool
+        Whether ``expected`` was measured on a flat frame (else it is the optics' model).
     """
     on = levels[lit]
     signal = float(np.median(on))
@@ -341,10 +345,11 @@ def check_frame_light(levels, noise: float, lit, expected, optics, name: str = "
     ratio = on / np.maximum(np.asarray(expected, float), 1e-12)
     spread = float(np.std(ratio) / np.mean(ratio))
     if spread > 0.5:
+        against = "the flat's" if flat else "the optics' model (no flat given)"
         raise SsdpcError(
-            f"{name}: the lit lenslets' brightness differs from the flat's by {100 * spread:.0f}% (rms): the frame "
-            "does not look like this instrument's frames at this condenser NA; check the calibration, the flat "
-            "and the condenser aperture"
+            f"{name}: the lit lenslets' brightness differs from {against} by {100 * spread:.0f}% (rms): the frame "
+            "does not look like this instrument's frames at this condenser NA; check the calibration (recalibrate "
+            "on a white frame), the flat and condenser_na"
         )
 
 

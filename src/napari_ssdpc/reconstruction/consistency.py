@@ -31,6 +31,7 @@ __all__ = [
     "check_condenser_na",
     "check_ei_shift",
     "check_exposure",
+    "check_lit_lenslets",
     "ei_shift_px",
     "ei_templates",
 ]
@@ -76,6 +77,34 @@ def apparent_condenser_na(levels, lenslets, optics) -> tuple[float, float]:
     err = [misfit(na) for na in nas]
     best = int(np.argmin(err))
     return float(nas[best]), misfit(float(optics.condenser_na)) - err[best]
+
+
+def check_lit_lenslets(lenslets, optics, name: str = "flat frame") -> None:
+    """Refuse lenslets lit on the flat whose sub-aperture the condenser disk does not reach.
+
+    A lenslet gets direct light only where its sub-aperture overlaps the condenser disk (paper
+    Eq. 2). One that the flat shows lit although the overlap is empty sits where the calibration
+    puts another lenslet: its centres were swapped or edited (or the condenser NA is wrong).
+
+    Parameters
+    ----------
+    lenslets : list of Lenslet
+        The lenslets lit on the flat.
+    optics : Optics
+    name : str
+        For the message.
+    """
+    d = np.hypot(*np.array([ln.u for ln in lenslets], float).reshape(-1, 2).T)
+    model = circle_overlap_fraction(d, optics.subaperture_radius, optics.condenser_na / optics.wavelength_um)
+    dark = [ln for ln, m in zip(lenslets, model) if m <= 0]
+    if dark:
+        ln = dark[0]
+        raise SsdpcError(
+            f"{name}: {len(dark)} lenslet(s) are lit (e.g. row {ln.row}, col {ln.col}) whose sub-aperture the "
+            f"condenser disk (NA {optics.condenser_na:g}) does not reach: the calibration's lenslet centres were "
+            "swapped or edited, or condenser_na is not the flat's; recalibrate on a white frame (`ssdpc calibrate`) "
+            "or set condenser_na"
+        )
 
 
 #: A frame is refused as lit at another condenser NA when the optics' NA fits its lenslets' light

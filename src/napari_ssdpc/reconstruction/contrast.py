@@ -87,6 +87,8 @@ class ViewContrast:
             raise SsdpcError("no lenslet receives direct light; check the flat frame and the condenser NA")
         self.lit = np.flatnonzero(lit)
         self.lenslets = [cal.lenslets[i] for i in self.lit]
+        if fv is not None:
+            consistency.check_lit_lenslets(self.lenslets, optics)
         self._ei = consistency.ei_templates(cal, self.lit)  # where the calibration puts the lit images
         if flat is not None:
             consistency.check_ei_shift(consistency.ei_shift_px(flat, self._ei), "flat frame")
@@ -132,7 +134,11 @@ class ViewContrast:
         checks.check_saturated(frame, name)
         dark_px = checks.dark_pixels(img, cal)
         if self.dark is None and dark_px.size < 100:
-            raise SsdpcError("no dark pixels outside the elemental images to estimate the dark offset; pass dark=VALUE")
+            raise SsdpcError(
+                f"{name}: no dark pixels outside the elemental images to estimate the dark offset: the calibration's "
+                "EI radius or centres do not fit this camera (recalibrate on a white frame), or give the dark "
+                "offset (Python API: Reconstructor(..., dark=VALUE))"
+            )
         dark = float(np.median(dark_px)) if self.dark is None else self.dark
         views = extract_views(img - dark, cal).data
         levels = np.array([np.median(v[self.mask]) for v in views])
@@ -176,7 +182,9 @@ class ViewContrast:
         warn_saturation(frame)
         levels, noise, all_views = self._measure(frame, name)
         lit, expected = self.lit, self.level[self.lit]
-        checks.check_frame_light(levels, noise, lit, expected, self.optics, name, self.calibration.lenslets)
+        checks.check_frame_light(
+            levels, noise, lit, expected, self.optics, name, self.calibration.lenslets, flat=self.flat is not None
+        )
         consistency.check_ei_shift(consistency.ei_shift_px(frame, self._ei), name)
         views = all_views[self.lit]
         exposure = 1.0

@@ -92,7 +92,10 @@ class ViewModel:
         setup = transfer.LensletSetup(optics, lenslets, self.shape, float(pixel_um))
         i0_model = setup.i0
         if np.any(i0_model <= 0):
-            raise SsdpcError("a view without direct light cannot be inverted; leave dark-field lenslets out")
+            raise SsdpcError(
+                "a lit view gets no direct light at this condenser NA: the calibration's lenslet centres were swapped "
+                "or edited, or condenser_na is not the flat's; recalibrate on a white frame or set condenser_na"
+            )
         i0 = np.asarray(i0_model if i0 is None else i0, float)
         self.w = np.sqrt(i0 / i0.max()).astype(np.float32)
         self.band = Band.box(self.shape, setup.m_out)

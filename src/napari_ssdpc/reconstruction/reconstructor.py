@@ -177,6 +177,7 @@ class Reconstructor:
                 f"Reconstructor takes a Calibration, got {type(calibration).__name__}; "
                 "read one with Calibration.from_json(path) or make one with calibrate(white, optics)"
             )
+        _check_arguments(min_light=min_light, progress=progress, method=method)
         t0 = time.perf_counter()
         self.config, self.calibration = config, calibration
         self.optics = optics = config.optics
@@ -303,6 +304,7 @@ class Reconstructor:
             The frame does not fit the calibration or the flat, or the result is not finite or
             beyond any sample.
         """
+        _check_arguments(warm=warm, progress=progress, should_stop=should_stop)
         t0 = time.perf_counter()
         views, exposure = self.views.measure(frame, name)
         t1 = time.perf_counter()
@@ -344,3 +346,22 @@ class Reconstructor:
             **self.method.settings(),
             "lenslets_used": [[ln.row, ln.col] for ln in self.lenslets],
         }
+
+
+def _check_arguments(**given) -> None:
+    """One-line errors for Python API arguments of the wrong kind (the CLI and napari pass them right)."""
+    for key, value in given.items():
+        if value is None:
+            continue
+        if key == "min_light":
+            ok = isinstance(value, (int, float, np.number)) and not isinstance(value, bool) and 0 < value < 1
+            want = "a fraction of the brightest lenslet's light, 0 to 1 (default 0.05)"
+        elif key == "warm":
+            ok, want = isinstance(value, Solution), "the previous frame's result.solution, or None"
+        elif key == "method":
+            ok = isinstance(value, type) and issubclass(value, PhaseMethod)
+            want = "a PhaseMethod class (docs/architecture.md), or None for reconstruction.method"
+        else:
+            ok, want = callable(value), "a function, or None"
+        if not ok:
+            raise SsdpcError(f"{key} = {value!r:.60}: give {want}")

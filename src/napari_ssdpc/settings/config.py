@@ -54,14 +54,27 @@ class RunConfig(SettingsModel):
         -------
         RunConfig
         """
+        if not isinstance(optics, Optics):
+            raise SsdpcError(
+                f"RunConfig.of takes an Optics, got {type(optics).__name__}: use Optics.from_yaml(path) or "
+                "Optics.paper()"
+            )
+        if reconstruction is not None and not isinstance(reconstruction, ReconstructionSettings):
+            raise SsdpcError(f"reconstruction must be ReconstructionSettings, got {type(reconstruction).__name__}")
         save = changes.pop("save", ())
+        save = [save] if isinstance(save, str) else save
         rec = reconstruction or ReconstructionSettings()
         if changes:
             data = rec.to_dict()
             for key, value in changes.items():
-                data[key] = {**data[key], **value} if isinstance(value, dict) else value
+                old = data.get(key)
+                data[key] = {**old, **value} if isinstance(value, dict) and isinstance(old, dict) else value
             rec = ReconstructionSettings.from_dict(data, source="reconstruction settings")
-        return cls(optics=optics, reconstruction=rec, outputs=OutputSettings.from_dict({"save": list(save)}))
+        return cls(
+            optics=optics,
+            reconstruction=rec,
+            outputs=OutputSettings.from_dict({"save": list(save) if isinstance(save, (list, tuple, set)) else save}),
+        )
 
     def replace_reconstruction(self, **changes) -> RunConfig:
         """A copy with reconstruction keys changed (sections merged, as in :meth:`of`).
