@@ -22,8 +22,11 @@ import tifffile
 from napari_ssdpc.calibration.result import Calibration
 from napari_ssdpc.cli.main import main
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.pipeline import sinks
+from napari_ssdpc.pipeline.job import Job
+from napari_ssdpc.pipeline.run import Pipeline
 from napari_ssdpc.reconstruction.checks import OPTICS_FIELDS
-from napari_ssdpc.reconstruction.reconstructor import Reconstructor
+from napari_ssdpc.reconstruction.reconstructor import Reconstructor, z_grid
 from napari_ssdpc.settings.config import RunConfig
 from napari_ssdpc.settings.optics import Optics
 
@@ -534,6 +537,49 @@ def test_api_settings_and_files(unchanged, api, case):
     assert words in _one_line(e.value)
 
 
+def _pipeline(a):
+    return Pipeline(Job(a[5], a[1], a[2]), reconstructor=object())  # refused before the reconstructor is used
+
+
+def _sinks():
+    return sinks
+
+
+_API_PIPELINE = {
+    "z-grid-tiny-dz": (lambda a: _z_grid()(0, 1e6, 1e-9), "at most"),
+    "z-grid-nan": (lambda a: _z_grid()(math.nan, math.nan, 1.0), "finite"),
+    "z-grid-text": (lambda a: _z_grid()("0", 1, 1), "finite"),
+    "pipeline-none": (lambda a: Pipeline(None), "takes a Job"),
+    "job-none": (
+        lambda a: __import__("napari_ssdpc.pipeline.job", fromlist=["x"]).Job(None, a[1]).build(),
+        "RunConfig",
+    ),
+    "source-none": (lambda a: _pipeline(a).run(None, _sinks().MemorySink(), progress=False), "TIFF path"),
+    "source-list": (lambda a: _pipeline(a).run([1, 2], _sinks().MemorySink(), progress=False), "TIFF path"),
+    "source-4d": (lambda a: _pipeline(a).run(np.zeros((2, 2, 64, 64)), _sinks().MemorySink()), "(t, y, x)"),
+    "source-missing": (lambda a: _pipeline(a).run("/no/such.tif", _sinks().MemorySink()), "not found"),
+    "sink-none": (lambda a: _pipeline(a).run(a[3][:1], None, progress=False), "Sink"),
+    "sink-path": (lambda a: _pipeline(a).run(a[3][:1], "out.zarr", progress=False), "Sink"),
+    "stop-after-negative": (lambda a: _pipeline(a).run(a[3][:1], _sinks().MemorySink(), stop_after=-1), "stop_after"),
+    "stop-after-text": (lambda a: _pipeline(a).run(a[3][:1], _sinks().MemorySink(), stop_after="a"), "stop_after"),
+    "zarr-sink-none": (lambda a: _sinks().ZarrSink(None), "path"),
+    "zarr-sink-save": (lambda a: _sinks().ZarrSink("x.zarr", ["everything"]), "everything"),
+    "tiff-sink-none": (lambda a: _sinks().OmeTiffSink(None), "'ri'"),
+}
+
+
+def _z_grid():
+    return z_grid
+
+
+@pytest.mark.parametrize("case", list(_API_PIPELINE))
+def test_api_pipeline_arguments(unchanged, api, case):
+    make, words = _API_PIPELINE[case]
+    with pytest.raises(Exception) as e:
+        make(api)
+    assert words in _one_line(e.value)
+
+
 @pytest.fixture(scope="module")
 def rec(api):
     return Reconstructor(api[5], api[1], flat=api[2])
@@ -807,7 +853,7 @@ def sweep_counts() -> dict:
         + len(_OUTPUT_CASES)
         + len(_OTHER_COMMANDS)
     )
-    api = len(_API_BUILD) + len(OPTICS_FIELDS) + len(_API_CONFIG) + len(_API_FRAMES) + 3
+    api = len(_API_BUILD) + len(OPTICS_FIELDS) + len(_API_CONFIG) + len(_API_FRAMES) + len(_API_PIPELINE) + 3
     napari = len(_STORE_DAMAGE) + len(_TIFF_DAMAGE) + 3 * len(_FOREIGN) + 2 * len(_WRITER) + len(_WRITER_TARGETS) + 1
     return {"cli": cli, "api": api, "napari": napari}
 

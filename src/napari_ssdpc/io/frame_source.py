@@ -24,6 +24,10 @@ class StoredFrames:
 
     def __init__(self, source):
         in_memory = not isinstance(source, (str, Path))  # a NumPy array, or a lazy (dask) one
+        if in_memory and not (hasattr(source, "ndim") and hasattr(source, "shape") and hasattr(source, "dtype")):
+            raise SsdpcError(
+                f"frames: give a TIFF path, an OME-Zarr folder or a (t, y, x) array, got {type(source).__name__}"
+            )
         self.path = None if in_memory else Path(source)
         self._array = source if in_memory else None
         self._data = None

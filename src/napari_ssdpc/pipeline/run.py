@@ -108,6 +108,8 @@ class Pipeline:
     """
 
     def __init__(self, job: Job, *, reconstructor=None, progress=None, workers=None, scheduler=None):
+        if not isinstance(job, Job):
+            raise SsdpcError(f"Pipeline takes a Job (configuration, calibration, flat), got {type(job).__name__}")
         if workers is not None and workers < 1:
             raise SsdpcError(f"--workers must be >= 1, got {workers}")
         self.job = job
@@ -156,6 +158,10 @@ class Pipeline:
         -------
         RunReport
         """
+        if not isinstance(sink, Sink):
+            raise SsdpcError(f"the results need a Sink (MemorySink, OmeTiffSink, ZarrSink), got {type(sink).__name__}")
+        if stop_after is not None and not (isinstance(stop_after, int) and stop_after >= 0):
+            raise SsdpcError(f"stop_after = {stop_after!r}: give a number of frames >= 0, or None")
         source = as_source(source)
         cal_shape = tuple(self.job.calibration.frame_shape)
         if tuple(source.frame_shape) != cal_shape:

@@ -8,6 +8,7 @@ after an error. Storage itself (the files' formats, the store's stamp and lock) 
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -174,6 +175,8 @@ class OmeTiffSink(Sink):
     """
 
     def __init__(self, paths: dict, meta: dict | None = None):
+        if not isinstance(paths, dict) or "ri" not in paths:
+            raise SsdpcError(f"OmeTiffSink takes {{quantity: file}} with 'ri', got {paths!r:.80}")
         self.paths, self.meta = dict(paths), dict(meta or {})
         self.save = [n for n in self.paths if n != "ri"]
         self.written: list[Path] = []
@@ -213,6 +216,8 @@ class ZarrSink(Sink):
     """
 
     def __init__(self, out, save=(), meta: dict | None = None):
+        if not isinstance(out, (str, os.PathLike)):
+            raise SsdpcError(f"ZarrSink takes the store's path (OUT.zarr), got {type(out).__name__}")
         self.out = Path(out)
         self.save = parse_save(list(save))
         self.meta = dict(meta or {})

@@ -14,6 +14,7 @@ Everything that does not depend on the frame is built once, from one
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -32,7 +33,7 @@ from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solutio
 from napari_ssdpc.reconstruction.stacks import DirectionalStacks
 from napari_ssdpc.settings.config import RunConfig
 from napari_ssdpc.settings.outputs import QUANTITIES, layout
-from napari_ssdpc.settings.reconstruction import plane_count
+from napari_ssdpc.settings.reconstruction import MAX_PLANES, plane_count
 
 __all__ = ["Reconstructor", "Result", "z_grid"]
 
@@ -51,11 +52,15 @@ def z_grid(z_min_um: float, z_max_um: float, dz_um: float) -> np.ndarray:
     -------
     ndarray, float64, (Z,)
     """
+    if not all(isinstance(v, (int, float, np.number)) and math.isfinite(v) for v in (z_min_um, z_max_um, dz_um)):
+        raise SsdpcError(f"z from {z_min_um!r} to {z_max_um!r} every {dz_um!r} µm: give finite numbers")
     if not dz_um > 0:
         raise SsdpcError(f"dz must be > 0 µm, got {dz_um}")
     if z_max_um < z_min_um:
         raise SsdpcError(f"z range is empty: z_max {z_max_um} < z_min {z_min_um}; give --z ZMIN ZMAX with ZMIN <= ZMAX")
     n = plane_count(z_min_um, z_max_um, dz_um)
+    if n > MAX_PLANES:
+        raise SsdpcError(f"{n} planes from z {z_min_um} to {z_max_um} µm every {dz_um} µm (at most {MAX_PLANES})")
     return (z_min_um + dz_um * np.arange(n)).astype(np.float64)
 
 
