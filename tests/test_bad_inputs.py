@@ -431,6 +431,24 @@ def test_cli_other_commands(unchanged, tmp_path, capsys, case):
     assert rc == 2 and words in err, err
 
 
+def test_cli_design_and_the_output_name_the_medium_index(unchanged, tmp_path, capsys):
+    """Correct results: `ssdpc design` shows the medium index, and a reconstruction records it."""
+    assert main(["design", "--optics", str(unchanged / "optics.yaml")]) == 0
+    assert "Medium index n_medium (RI = n_medium + Δn)" in capsys.readouterr().out
+    d = Optics.from_yaml(unchanged / "optics.yaml").to_dict()
+    (tmp_path / "water.yaml").write_text(json.dumps({**d, "medium_index": 1.333}))
+    assert main(["design", "--optics", str(tmp_path / "water.yaml"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["medium_index"] == 1.333
+    out = tmp_path / "o.ome.tif"
+    rc, err = _cli(_rec(unchanged, out), capsys)
+    assert rc == 0, err
+    from napari_ssdpc._napari.reader import _our_description
+    from napari_ssdpc.io.frames import tiff_info
+
+    desc = _our_description(tiff_info(out))
+    assert desc["settings"]["medium_index"] == 1.518 and desc["optics"]["medium_index"] == 1.518
+
+
 # ------------------------------------------------------------------------------ API
 @pytest.fixture(scope="module")
 def api(base, synthetic_series):
@@ -852,6 +870,7 @@ def sweep_counts() -> dict:
         + 2 * len(_OPTICS_FILE_CASES)
         + len(_OUTPUT_CASES)
         + len(_OTHER_COMMANDS)
+        + 1
     )
     api = len(_API_BUILD) + len(OPTICS_FIELDS) + len(_API_CONFIG) + len(_API_FRAMES) + len(_API_PIPELINE) + 3
     napari = len(_STORE_DAMAGE) + len(_TIFF_DAMAGE) + 3 * len(_FOREIGN) + 2 * len(_WRITER) + len(_WRITER_TARGETS) + 1
