@@ -57,7 +57,7 @@ class TvMethod(PhaseMethod):
         contrast = contrast_of(views, v.view_mask)
         state = None if warm is None else warm.state
         if isinstance(state, TvState):
-            start, iterations = state, t.warm_iterations
+            start, iterations = state, min(t.warm_iterations, t.iterations)  # never more than a cold frame
         else:
             start = warm.phase if warm is not None else self.wotf.phase(contrast) * v.mask
             iterations = t.iterations
