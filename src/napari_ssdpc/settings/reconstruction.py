@@ -118,7 +118,10 @@ class TvSettings(SettingsModel):
     )
     iterations: int = bounded(60, 1, 2000, "most ADMM iterations")
     warm_iterations: int = bounded(
-        20, 1, 2000, "most ADMM iterations of a frame that starts where the previous frame's solve ended"
+        20,
+        1,
+        2000,
+        "most ADMM iterations of a frame that starts where the previous frame's solve ended (at most iterations)",
     )
 
 
