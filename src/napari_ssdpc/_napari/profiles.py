@@ -16,11 +16,12 @@ import math
 from pathlib import Path
 
 import numpy as np
-from magicgui.widgets import ComboBox, Container, FileEdit, Label, PushButton
+from magicgui.widgets import Container, FileEdit, Label, PushButton
 from qtpy.QtWidgets import QScrollArea, QVBoxLayout, QWidget
 from scipy import ndimage
 
 from napari_ssdpc._napari import notify
+from napari_ssdpc._napari.widgets.choices import LayerChoice, result_layer_choices
 from napari_ssdpc._napari.widgets.common import MIN_DOCK_HEIGHT_PX
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.files import atomic_write
@@ -126,12 +127,12 @@ class ProfileWidget(QWidget):
         from matplotlib.figure import Figure
 
         self.viewer = napari_viewer
-        self.image = ComboBox(
+        self.image = LayerChoice(
             label="image",
-            choices=self._images,
-            tooltip="layer to sample, e.g. the RI volume (values in its own unit, µm scale)",
+            choices=result_layer_choices(napari_viewer, min_ndim=2, others=True),
+            tooltip="layer to sample (default: the newest RI volume; values in its own unit, µm scale)",
         )
-        self.lines = ComboBox(
+        self.lines = LayerChoice(
             label="lines",
             choices=self._shapes,
             tooltip="Shapes layer whose line shapes are profiled (draw with the line tool, in xy or in an xz/yz view)",
@@ -175,15 +176,6 @@ class ProfileWidget(QWidget):
         self._rewire()
 
     # ------------------------------------------------------------------ layers
-    def _images(self, _w=None):
-        """Image layers, reconstruction results first, the top of the layer list first."""
-        layers = [
-            lyr for lyr in reversed(self.viewer.layers) if lyr._type_string == "image" and lyr.ndim >= 2 and not lyr.rgb
-        ]
-        results = [lyr for lyr in layers if lyr.metadata.get("ssdpc", {}).get("kind") == "result"]
-        results.sort(key=lambda lyr: lyr.metadata["ssdpc"].get("quantity") != "ri")  # RI first, then the rest
-        return [(lyr.name, lyr) for lyr in results + [lyr for lyr in layers if lyr not in results]]
-
     def _shapes(self, _w=None):
         """Shapes layers (not the calibration circles), the top of the layer list first."""
         return [

@@ -107,6 +107,11 @@ def _optics_meta(optics, name: str) -> dict:
     }
 
 
+def _role(meta: dict, frame: str) -> dict:
+    """A layer's own copy of the sample's metadata, with what the frame is ('raw', 'flat', 'white')."""
+    return {"ssdpc": {**meta["ssdpc"], "frame": frame}}
+
+
 def _contrast(frame) -> list[float]:
     lo, hi = np.percentile(np.asarray(frame)[::4, ::4], [1, 99.9])
     return [float(lo), float(max(hi, lo + 1))]
@@ -184,11 +189,27 @@ def pmma_bead_sample():
     return [
         (
             white,
-            {"name": "PMMA bead white", "metadata": meta, "visible": False, "contrast_limits": lims, **um},
+            {
+                "name": "PMMA bead white",
+                "metadata": _role(meta, "white"),
+                "visible": False,
+                "contrast_limits": lims,
+                **um,
+            },
             "image",
         ),
-        (flat, {"name": "PMMA bead flat", "metadata": meta, "visible": False, "contrast_limits": lims, **um}, "image"),
-        (frame, {"name": "PMMA bead", "metadata": meta, "contrast_limits": lims, **um}, "image"),
+        (
+            flat,
+            {
+                "name": "PMMA bead flat",
+                "metadata": _role(meta, "flat"),
+                "visible": False,
+                "contrast_limits": lims,
+                **um,
+            },
+            "image",
+        ),
+        (frame, {"name": "PMMA bead", "metadata": _role(meta, "raw"), "contrast_limits": lims, **um}, "image"),
     ]
 
 
@@ -345,19 +366,31 @@ def moving_sample_series(n_frames: int = SERIES_FRAMES, prefetch: bool = True):
     return [
         (
             white,
-            {"name": "moving sample white", "metadata": meta, "visible": False, "contrast_limits": lims, **um},
+            {
+                "name": "moving sample white",
+                "metadata": _role(meta, "white"),
+                "visible": False,
+                "contrast_limits": lims,
+                **um,
+            },
             "image",
         ),
         (
             flat,
-            {"name": "moving sample flat", "metadata": meta, "visible": False, "contrast_limits": lims, **um},
+            {
+                "name": "moving sample flat",
+                "metadata": _role(meta, "flat"),
+                "visible": False,
+                "contrast_limits": lims,
+                **um,
+            },
             "image",
         ),
         (
             series,
             {
                 "name": "moving sample",
-                "metadata": meta,
+                "metadata": _role(meta, "raw"),
                 "contrast_limits": lims,
                 "axis_labels": ("t", "y", "x"),
                 **frame_transform(optics, 3),

@@ -7,11 +7,11 @@ from magicgui.widgets import ComboBox, FileEdit, Label, PushButton
 
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.reader import calibration_layers
+from napari_ssdpc._napari.widgets.choices import LayerChoice, image_layer_choices
 from napari_ssdpc._napari.widgets.common import (
     StepWidget,
     follow_layers,
     frame_index,
-    image_layer_choices,
     run_buttons,
     show_layer,
     wrap,
@@ -51,7 +51,7 @@ class CalibrateWidget(StepWidget):
 
     def __init__(self, napari_viewer):
         super().__init__(napari_viewer)
-        self.image = ComboBox(
+        self.image = LayerChoice(
             label="frame",
             choices=image_layer_choices(napari_viewer, prefer="white"),
             tooltip="raw frame to calibrate on: best a white frame (condenser fully open); a "

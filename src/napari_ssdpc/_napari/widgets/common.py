@@ -20,94 +20,14 @@ __all__ = [
     "MIN_DOCK_HEIGHT_PX",
     "StepWidget",
     "compact",
-    "calibration_layer_choices",
     "catching_warnings",
     "follow_layers",
     "frame_index",
-    "image_layer_choices",
     "region_um",
     "run_buttons",
-    "shapes_layer_choices",
     "show_layer",
     "wrap",
 ]
-
-
-def image_layer_choices(viewer, ndims=(2, 3), allow_none: str | None = None, prefer: str = ""):
-    """Choices callable for a ComboBox of raw image layers: the top of the layer list first, layers
-    whose name contains ``prefer`` before all others (the default choice), then ``allow_none``.
-
-    Parameters
-    ----------
-    viewer : napari.Viewer
-    ndims : tuple of int
-        Layer dimensionalities offered.
-    allow_none : str, optional
-        Label of a "none" choice.
-    prefer : str
-        Name fragment of the default choice.
-
-    Returns
-    -------
-    callable
-    """
-    from napari.layers import Image
-
-    def choices(_widget=None):
-        layers = [
-            lyr
-            for lyr in reversed(viewer.layers)
-            if isinstance(lyr, Image) and lyr.ndim in ndims and lyr.metadata.get("ssdpc", {}).get("kind") != "result"
-        ]
-        first = [lyr for lyr in layers if prefer and prefer in lyr.name.lower()]
-        rest = [lyr for lyr in layers if lyr not in first]
-        none = [(allow_none, None)] if allow_none else []
-        return [(lyr.name, lyr) for lyr in first] + none + [(lyr.name, lyr) for lyr in rest]
-
-    return choices
-
-
-def calibration_layer_choices(viewer):
-    """Choices callable for a ComboBox of calibration (EI circles) layers.
-
-    Parameters
-    ----------
-    viewer : napari.Viewer
-
-    Returns
-    -------
-    callable
-    """
-
-    def choices(_widget=None):
-        return [
-            (lyr.name, lyr)
-            for lyr in viewer.layers
-            if lyr.metadata.get("ssdpc", {}).get("kind") == "calibration" and lyr._type_string == "shapes"
-        ]
-
-    return choices
-
-
-def shapes_layer_choices(viewer, none: str):
-    """Choices callable for a ComboBox of Shapes layers, ``none`` first (the default).
-
-    Parameters
-    ----------
-    viewer : napari.Viewer
-    none : str
-        Label of the "none" choice.
-
-    Returns
-    -------
-    callable
-    """
-    from napari.layers import Shapes
-
-    def choices(_widget=None):
-        return [(none, None)] + [(lyr.name, lyr) for lyr in reversed(viewer.layers) if isinstance(lyr, Shapes)]
-
-    return choices
 
 
 def region_um(layer) -> list[float]:

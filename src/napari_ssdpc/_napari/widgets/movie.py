@@ -12,6 +12,7 @@ from pathlib import Path
 from magicgui.widgets import ComboBox, FileEdit, SpinBox
 
 from napari_ssdpc._napari import notify
+from napari_ssdpc._napari.widgets.choices import LayerChoice, result_layer_choices
 from napari_ssdpc._napari.widgets.common import StepWidget, follow_layers, run_buttons
 
 __all__ = ["MOVIE_KINDS", "MovieWidget", "export_movie"]
@@ -80,7 +81,11 @@ class MovieWidget(StepWidget):
 
     def __init__(self, napari_viewer):
         super().__init__(napari_viewer)
-        self.layer = ComboBox(label="volume", choices=self._results, tooltip="the reconstruction layer to film")
+        self.layer = LayerChoice(
+            label="volume",
+            choices=result_layer_choices(napari_viewer),
+            tooltip="the reconstruction layer to film (default: the newest RI)",
+        )
         self.kind = ComboBox(
             label="movie",
             choices=list(MOVIE_KINDS),
@@ -96,13 +101,6 @@ class MovieWidget(StepWidget):
         self.extend([self.layer, self.kind, self.seconds, self.fps, self.path, self.run_button, self.status])
         self.run_button.changed.connect(lambda *_: self.export())
         follow_layers(napari_viewer, self)
-
-    def _results(self, _widget=None):
-        return [
-            (lyr.name, lyr)
-            for lyr in reversed(self.viewer.layers)
-            if lyr.metadata.get("ssdpc", {}).get("kind") == "result" and lyr.ndim >= 3
-        ]
 
     def export(self) -> Path | None:
         """Write the movie to the chosen file (the message says why not, if it cannot).

@@ -7,9 +7,9 @@ from magicgui.widgets import CheckBox, ComboBox, FloatSpinBox, PushButton, SpinB
 
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.layers import result_layer
+from napari_ssdpc._napari.widgets.choices import LayerChoice, calibration_layer_choices
 from napari_ssdpc._napari.widgets.common import (
     StepWidget,
-    calibration_layer_choices,
     follow_layers,
     run_buttons,
     show_layer,
@@ -41,10 +41,10 @@ class OperatorsWidget(StepWidget):
     def __init__(self, napari_viewer):
         super().__init__(napari_viewer, "operators_widget")
         rec = ReconstructionSettings()
-        self.calibration = ComboBox(
+        self.calibration = LayerChoice(
             label="calibration",
             choices=calibration_layer_choices(napari_viewer),
-            tooltip="EI-circles layer made by Calibrate or opened from a calibration JSON",
+            tooltip="EI-circles layer made by Calibrate or opened from a calibration JSON (default: the newest)",
         )
         self.z_min = _spin_box(
             rec, "z_min_um", "z min (µm)", 1, "first plane, µm from the focal plane (z > 0: farther from the objective)"

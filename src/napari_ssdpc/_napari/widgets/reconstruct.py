@@ -11,14 +11,18 @@ from qtpy.QtCore import QTimer
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.layers import result_layer
 from napari_ssdpc._napari.placement import scale_bar
+from napari_ssdpc._napari.widgets.choices import (
+    LayerChoice,
+    image_layer_choices,
+    same_recording_flat,
+    shapes_layer_choices,
+)
 from napari_ssdpc._napari.widgets.common import (
     StepWidget,
     follow_layers,
     frame_index,
-    image_layer_choices,
     region_um,
     run_buttons,
-    shapes_layer_choices,
     show_layer,
 )
 from napari_ssdpc._napari.widgets.jobs import JobRunner
@@ -69,17 +73,20 @@ class ReconstructWidget(StepWidget):
     def __init__(self, napari_viewer):
         super().__init__(napari_viewer, "reconstruct_widget")
         rec = ReconstructionSettings()
-        self.raw = ComboBox(
+        self.raw = LayerChoice(
             label="raw frame(s)",
             choices=image_layer_choices(napari_viewer),
-            tooltip="raw light-field frame (y, x) or series (t, y, x), camera units",
+            tooltip="raw light-field frame (y, x) or series (t, y, x), camera units (default: the newest frame "
+            "that is neither a white nor a flat frame)",
         )
-        self.flat = ComboBox(
+        self.flat = LayerChoice(
+            prefer=same_recording_flat(self.raw),
             label="flat frame",
             choices=image_layer_choices(napari_viewer, (2,), "none (model)", "flat"),
-            tooltip="flat frame (no sample) at the sample's condenser setting, for flat-fielding; "
-            "none: each view is normalised by its median",
+            tooltip="flat frame (no sample) at the sample's condenser setting, for flat-fielding (default: the "
+            "flat of the raw frame's recording); none: each view is normalised by its median",
         )
+        self.raw.changed.connect(lambda *_: self.flat.follow())
         lo, hi = field_range(RlSettings, "iterations")
         self.iterations = SpinBox(
             label="RL iterations",
@@ -97,7 +104,7 @@ class ReconstructWidget(StepWidget):
             tooltip="Tikhonov regularisation of the phase inversion (no unit; paper Eq. 7), "
             "relative to the strongest transfer function; 0 = the method's default",
         )
-        self.region = ComboBox(
+        self.region = LayerChoice(
             label="multislice region",
             choices=shapes_layer_choices(napari_viewer, "around the objects"),
             tooltip="method 'multislice': a Shapes layer whose shapes (a rectangle drawn over the views or the "

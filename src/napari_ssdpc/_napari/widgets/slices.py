@@ -9,9 +9,10 @@ scale, with the layer's colormap and contrast limits.
 from __future__ import annotations
 
 import numpy as np
-from magicgui.widgets import ComboBox, Container, Label
+from magicgui.widgets import Container, Label
 from qtpy.QtWidgets import QVBoxLayout, QWidget
 
+from napari_ssdpc._napari.widgets.choices import LayerChoice, result_layer_choices
 from napari_ssdpc._napari.widgets.common import MIN_DOCK_HEIGHT_PX, follow_layers, wrap
 
 __all__ = ["SlicesWidget", "sections"]
@@ -64,7 +65,11 @@ class SlicesWidget(QWidget):
         from matplotlib.figure import Figure
 
         self.viewer = napari_viewer
-        self.layer = ComboBox(label="volume", choices=self._results, tooltip="the reconstruction to section")
+        self.layer = LayerChoice(
+            label="volume",
+            choices=result_layer_choices(napari_viewer),
+            tooltip="the reconstruction to section (default: the newest RI)",
+        )
         self.info = wrap(Label(value=""))
         self.controls = Container(widgets=[self.layer, self.info])
         self.figure = Figure(figsize=(4, 5), tight_layout=True)
@@ -77,15 +82,6 @@ class SlicesWidget(QWidget):
         self.layer.changed.connect(lambda *_: self.update())
         napari_viewer.dims.events.current_step.connect(lambda *_: self.update())
         napari_viewer.mouse_drag_callbacks.append(self._clicked)
-
-    def _results(self, _widget=None):
-        layers = [
-            lyr
-            for lyr in reversed(self.viewer.layers)
-            if lyr.metadata.get("ssdpc", {}).get("kind") == "result" and lyr.ndim >= 3
-        ]
-        layers.sort(key=lambda lyr: lyr.metadata["ssdpc"].get("quantity") != "ri")  # RI first
-        return [(lyr.name, lyr) for lyr in layers]
 
     def _clicked(self, viewer, event):
         """A click in the canvas moves the sections to that position."""
