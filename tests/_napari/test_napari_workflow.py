@@ -18,6 +18,7 @@ from napari_ssdpc._napari import notify as _notify
 from napari_ssdpc._napari import sample_data as _sample_data
 from napari_ssdpc._napari import widgets as _widgets
 from napari_ssdpc._napari.widgets import session as _session
+from napari_ssdpc.physics.design import design
 
 Z, DZ = (-10.0, 10.0), 2.0
 MENU = ("1. Optics", "2. Calibrate", "3. Operators", "4. Reconstruct", "5. Line profile")
@@ -48,6 +49,12 @@ def test_widgets_opened_from_the_plugins_menu_share_one_session_and_reach_an_ri_
     assert ri.data.shape[0] == 11 and np.allclose(ri.scale[0], DZ)
     settings = ri.metadata["ssdpc"]["settings"]
     assert settings["method"] == "tv" and settings["tv_sign"] == "lighter" and settings["tv_iterations_run"] <= 30
+    # the axial resolution is shown with the result: 24 µm expected at condenser NA 0.3
+    assert ri.metadata["ssdpc"]["axial_fwhm_um"] == pytest.approx(design(optics)["expected_axial_fwhm_um"])
+    assert "axial resolution ≈ 24 µm" in w["reconstruct"].status.value
+    lo, hi = ri.contrast_limits  # symmetric about the medium, spanning the bead: none of it clipped
+    assert hi - optics.medium_index == pytest.approx(optics.medium_index - lo)
+    assert lo <= float(ri.data.min()) + 1e-7
     assert ri.data.max() <= optics.medium_index + 1e-6  # the sign constraint holds: nowhere denser
     assert np.allclose(ri.scale[1:], optics.object_pixel_um, rtol=2e-3)
     # the bead (n 1.49 in 1.518) at the world origin: Δn < 0 there
@@ -119,6 +126,7 @@ def test_a_series_streams_to_ome_zarr_and_is_shown_from_disk(make_napari_viewer,
     command line) and the RI layer is read back from disk, never held in memory as a whole."""
     import zarr
 
+    from napari_ssdpc._napari.placement import scale_bar
     from napari_ssdpc.io.store import done_frames
 
     shown = []
@@ -138,6 +146,9 @@ def test_a_series_streams_to_ome_zarr_and_is_shown_from_disk(make_napari_viewer,
     _steps.wait_for(qtbot, rc)
     assert shown == [] and sorted(done_frames(tmp_path / "bead.zarr")) == [0, 1, 2]
     ri = viewer.layers["bead RI"]
+    # the first result, although streamed from disk: inputs hidden, view on the volume, scale bar in µm
+    assert not viewer.layers["bead series"].visible and not viewer.layers["PMMA bead"].visible
+    assert ri.visible and scale_bar(viewer).visible
     assert ri.data.shape[:2] == (3, 11) and not isinstance(ri.data, np.ndarray)  # lazy, from the store
     assert np.asarray(ri.data).min() - optics.medium_index < -0.002  # the bead
     # every frame is the core's: the series solved by the same job, each frame warm-started from the last

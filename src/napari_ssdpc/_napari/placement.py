@@ -14,7 +14,7 @@ import weakref
 
 from napari_ssdpc.settings.optics import Optics
 
-__all__ = ["follow_optics", "frame_transform", "place_frames", "scale_bar"]
+__all__ = ["follow_optics", "follow_results", "frame_transform", "place_frames", "scale_bar", "show_first_result"]
 
 
 def frame_transform(optics: Optics, ndim: int) -> dict:
@@ -112,3 +112,65 @@ def scale_bar(viewer):
     canvas = getattr(viewer, "canvas", None)
     overlays = getattr(canvas, "overlays", None)
     return overlays["scale_bar"] if overlays is not None else viewer.scale_bar
+
+
+def _is_result(layer) -> bool:
+    """A reconstruction's layer (a lenslet's PSF stack is not one)."""
+    info = layer.metadata.get("ssdpc", {})
+    return info.get("kind") == "result" and info.get("quantity") != "psf"
+
+
+def show_first_result(viewer, layer) -> None:
+    """Bring the first result into view: hide the inputs, fit the view to it, switch the scale bar on.
+
+    The inputs are the raw, flat and white frames (placed in µm or marked by this plugin), the
+    calibration overlays and the result's source layer; results are left as they are.
+
+    Parameters
+    ----------
+    viewer : napari.Viewer
+    layer : napari Image layer
+        A result layer (``metadata['ssdpc']['kind'] == 'result'``), in µm.
+    """
+    source = layer.metadata["ssdpc"].get("source")
+    for lyr in viewer.layers:
+        info = lyr.metadata.get("ssdpc", {})
+        if not _is_result(lyr) and (
+            lyr.name == source or info.get("kind") in ("raw", "calibration") or info.get("placed")
+        ):
+            lyr.visible = False
+    viewer.fit_to_view(layers=[layer])
+    scale_bar(viewer).visible = True  # every shown layer is in µm: the bar reads µm
+
+
+def follow_results(viewer=None) -> None:
+    """Give the first result that arrives in ``viewer`` the first-result treatment
+    (:func:`show_first_result`), however it came: a reconstruction, a streamed series or a file
+    opened with File › Open. Installed once per viewer; later results are left as the user set the view.
+
+    Parameters
+    ----------
+    viewer : napari.Viewer, optional
+        Default: napari's current viewer (none: nothing to do).
+    """
+    if viewer is None:
+        import napari
+
+        viewer = napari.current_viewer()  # a reader's: the viewer the file is opened in
+    if viewer is None or id(viewer) in _FOLLOWED:
+        return
+    _FOLLOWED.add(id(viewer))
+    weakref.finalize(viewer, _FOLLOWED.discard, id(viewer))
+    ref = weakref.ref(viewer)
+
+    def arrived(event):
+        v, layer = ref(), event.value
+        if v is None or not _is_result(layer):
+            return
+        if not any(_is_result(lyr) for lyr in v.layers if lyr is not layer):
+            show_first_result(v, layer)
+
+    viewer.layers.events.inserted.connect(arrived)
+
+
+_FOLLOWED: set[int] = set()  # ids of the viewers whose results are followed

@@ -226,6 +226,7 @@ class ProfileWidget(QWidget):
             ndim=nd,
             scale=img.scale[-nd:],
             translate=img.translate[-nd:],
+            units=img.units[-nd:],  # the image's µm: napari never mixes units, the scale bar keeps µm
             name=f"{img.name} profile lines",
             edge_color="yellow",
             edge_width=float(min(img.scale[-2:])),

@@ -280,12 +280,16 @@ def get_result_reader(path):
         return None
     try:
         if p.is_dir() and p.suffix.lower() == ".zarr":
-            return read_result if zarr_images(p) else None
-        if p.is_file() and p.suffix.lower() in (".tif", ".tiff"):
-            return read_result if _our_description(tiff_info(p)) is not None else None
+            ours = bool(zarr_images(p))
+        else:
+            ours = p.is_file() and p.suffix.lower() in (".tif", ".tiff") and _our_description(tiff_info(p)) is not None
     except Exception:  # unreadable or foreign: not ours
         return None
-    return None
+    if ours:
+        from napari_ssdpc._napari.placement import follow_results
+
+        follow_results()  # the first result opened is brought into view with a scale bar in µm
+    return read_result if ours else None
 
 
 def _is_ours(d) -> bool:

@@ -14,6 +14,7 @@ from pathlib import Path
 from qtpy.QtWidgets import QFileDialog, QHBoxLayout, QPushButton, QScrollArea, QTabWidget, QVBoxLayout, QWidget
 
 from napari_ssdpc._napari import notify
+from napari_ssdpc._napari.placement import place_frames
 from napari_ssdpc._napari.profiles import ProfileWidget
 from napari_ssdpc._napari.widgets.calibrate import CalibrateWidget
 from napari_ssdpc._napari.widgets.common import MIN_DOCK_HEIGHT_PX
@@ -224,7 +225,9 @@ class SsdpcDock(QWidget):
         if reader is None:
             notify.error(f"{path}: not a light-field frame (a 2D or (t, y, x) grey-level TIFF); choose another file")
             return []
-        return [getattr(self.viewer, f"add_{kind}")(data, **kwargs) for data, kwargs, kind in reader(str(path))]
+        added = [getattr(self.viewer, f"add_{kind}")(data, **kwargs) for data, kwargs, kind in reader(str(path))]
+        place_frames(self.viewer, self.session.optics)  # in the volume's µm, beside the results
+        return added
 
     def _restore(self) -> None:
         """The last session's settings, if any (silently skipped when unreadable)."""

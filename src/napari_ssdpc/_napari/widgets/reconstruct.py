@@ -9,8 +9,7 @@ from magicgui.widgets import CheckBox, ComboBox, FileEdit, FloatSpinBox, SpinBox
 from qtpy.QtCore import QTimer
 
 from napari_ssdpc._napari import notify
-from napari_ssdpc._napari.layers import result_layer
-from napari_ssdpc._napari.placement import scale_bar
+from napari_ssdpc._napari.layers import axial_fwhm_um, resolution_text, result_layer
 from napari_ssdpc._napari.widgets.choices import (
     LayerChoice,
     image_layer_choices,
@@ -294,7 +293,7 @@ class ReconstructWidget(StepWidget):
         self.session.built = (job, rec)
         self.session.operators_built.emit(rec)
         self._show_store(store)
-        return f"{store.name}: {self._shown_frames} frames written"
+        return f"{store.name}: {self._shown_frames} frames written; {resolution_text(axial_fwhm_um(rec.optics))}"
 
     def _done(self, job, source, indices, rec, arrays, res):
         self.session.built = (job, rec)
@@ -307,18 +306,14 @@ class ReconstructWidget(StepWidget):
             "settings": res.settings,
             "frames": [i for i in indices if i is not None],
             "optics": optics.to_dict(),
+            "axial_fwhm_um": axial_fwhm_um(optics),
         }
         origin = (float(res.z_um[0]), float(res.y_um[0]), float(res.x_um[0]))
-        first = f"{source} RI" not in self.viewer.layers
-        for q, a in arrays.items():
+        for q, a in arrays.items():  # the first result is brought into view (placement.follow_results)
             data, kwargs, _ = result_layer(a, q, res.voxel_um, origin, name=source, info=info)
             show_layer(self.viewer, data, kwargs)
-        if first:
-            # the raw frames live in sensor pixels, the results in µm: hide the inputs, show the volume
-            for lyr in self.viewer.layers:
-                if lyr.name == source or lyr.metadata.get("ssdpc", {}).get("kind") in ("raw", "calibration"):
-                    lyr.visible = False
-            self.viewer.fit_to_view(layers=[self.viewer.layers[f"{source} RI"]])
-            scale_bar(self.viewer).visible = True  # every layer is in µm now
         shape = next(iter(arrays.values())).shape
-        return f"{source}: {' × '.join(map(str, shape))} voxels of {' × '.join(f'{v:.3g}' for v in res.voxel_um)} µm"
+        return (
+            f"{source}: {' × '.join(map(str, shape))} voxels of {' × '.join(f'{v:.3g}' for v in res.voxel_um)} µm; "
+            f"{resolution_text(info['axial_fwhm_um'])}"
+        )

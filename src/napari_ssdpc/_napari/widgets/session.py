@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 from psygnal import Signal
 
-from napari_ssdpc._napari.placement import follow_optics
+from napari_ssdpc._napari.placement import follow_optics, follow_results
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.pipeline.job import Job
 from napari_ssdpc.settings.config import RunConfig
@@ -236,6 +236,7 @@ def session_for(viewer) -> Session:
         session = Session()
         _SESSIONS[key] = (weakref.ref(viewer), session)
         follow_optics(viewer, session)  # frames shown in µm follow edits of the optics
+        follow_results(viewer)  # the first result is brought into view, however it arrives
         weakref.finalize(viewer, _SESSIONS.pop, key, None)  # free the operators with the viewer
     return session
 
