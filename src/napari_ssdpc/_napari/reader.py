@@ -28,7 +28,17 @@ MAX_JSON_BYTES = 50_000_000
 def _stem(p: Path) -> str:
     """File name without its data suffix (.ome.tif, .tif, .zarr, .json, ...)."""
     name = p.name
-    for ext in (".ome.tiff", ".ome.tif", ".tiff", ".tif", ".zarr", ".json"):
+    for ext in (
+        ".ssdpc.ome.tiff",
+        ".ssdpc.ome.tif",
+        ".ssdpc.zarr",
+        ".ome.tiff",
+        ".ome.tif",
+        ".tiff",
+        ".tif",
+        ".zarr",
+        ".json",
+    ):
         if name.lower().endswith(ext):
             return name[: -len(ext)]
     return p.stem

@@ -14,6 +14,7 @@ import numpy as np
 from psygnal import Signal
 
 from napari_ssdpc._napari.placement import follow_optics, follow_results
+from napari_ssdpc._napari.preferences import prefer_own_readers
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.pipeline.job import Job
 from napari_ssdpc.settings.config import RunConfig
@@ -237,6 +238,7 @@ def session_for(viewer) -> Session:
         _SESSIONS[key] = (weakref.ref(viewer), session)
         follow_optics(viewer, session)  # frames shown in µm follow edits of the optics
         follow_results(viewer)  # the first result is brought into view, however it arrives
+        prefer_own_readers()  # the plugin's own files open without napari's "Choose reader"
         weakref.finalize(viewer, _SESSIONS.pop, key, None)  # free the operators with the viewer
     return session
 
