@@ -76,7 +76,7 @@ def test_end_to_end_bead(make_napari_viewer, qtbot, bead, errors):
 
     w["operators"].run()
     _steps.wait_for(qtbot, w["operators"])
-    assert w["operators"].status.value.startswith("built: 21 planes")
+    assert w["operators"].status.value.startswith("built in") and "21 planes" in w["operators"].status.value
     rec_built = _widgets.session_for(viewer).built[1]
 
     w["reconstruct"].run()

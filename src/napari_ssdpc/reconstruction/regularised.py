@@ -345,9 +345,22 @@ class TvInversion:
         return self.bk.to_host(out[self.planes]), report
 
     def _auto_sign(self, contrast, warm, phi_max, lam, iterations, tol, progress, should_stop):
-        """The sign the data support: a short solve with each, the lower objective wins."""
-        kw = dict(warm=warm, phi_max=phi_max, lam=lam, iterations=PROBE, tol=0.0, quiet=True)
-        probes = {s: self.phase(contrast, sign=s, **kw) for s in ("denser", "lighter")}
+        """The sign the data support: a short solve with each, the lower objective wins. Progress
+        counts against ``iterations`` (the chosen sign's path: its probe, then the rest), each
+        probe labelled; both probes stop with ``should_stop``."""
+
+        total = max(iterations, PROBE + 1)
+
+        def report_as(label, offset=0):
+            return None if progress is None else (lambda i, n, *_: progress(offset + i, total, label))
+
+        kw = dict(warm=warm, phi_max=phi_max, lam=lam, iterations=PROBE, tol=0.0, quiet=True, should_stop=should_stop)
+        probes = {
+            s: self.phase(contrast, sign=s, progress=report_as(f"TV: probing the sign ({s})"), **kw)
+            for s in ("denser", "lighter")
+        }
+        if should_stop is not None and should_stop():  # cancelled while probing: the estimate so far
+            return probes["denser"]
         best = min(probes, key=lambda s: probes[s][1].objective[-1])
         other = "lighter" if best == "denser" else "denser"
         phi, report = self.phase(
@@ -358,7 +371,7 @@ class TvInversion:
             lam=lam,
             iterations=max(iterations - PROBE, 1),
             tol=tol,
-            progress=progress,
+            progress=report_as(f"TV ({best})", PROBE),
             should_stop=should_stop,
         )
         report.sign_objectives = {s: probes[s][1].objective[-1] for s in probes}

@@ -195,19 +195,28 @@ class OperatorsWidget(StepWidget):
         except SsdpcError as e:
             notify.error(e)
             return None
+        if self.session.matching(job) is not None:  # the same settings, calibration and flat: nothing to build
+            self.status.value = f"up to date: {self._built_text(job, self.session.built[1])}"
+            return None
 
         def work(progress, should_stop):
             return job.build(progress)
 
         return self.runner.start(work, lambda rec: self._done(job, rec), "Operators")
 
+    def _built_text(self, job, rec) -> str:
+        widget = self.session.reconstruct_widget() if self.session.reconstruct_widget else None
+        flat = getattr(getattr(widget, "flat", None), "value", None)
+        with_flat = f"flat '{flat.name}'" if job.flat is not None and flat is not None else "no flat"
+        return (
+            f"{len(rec.z_um)} planes {rec.z_um[0]:g}…{rec.z_um[-1]:g} µm, {len(rec.lenslets)} lit lenslets, "
+            f"{with_flat}, α {rec.config.reconstruction.alpha:g}"
+        )
+
     def _done(self, job, rec):
         self.session.built = (job, rec)
         self.session.operators_built.emit(rec)
-        return (
-            f"built: {len(rec.z_um)} planes {rec.z_um[0]:g}…{rec.z_um[-1]:g} µm, {len(rec.lenslets)} lit "
-            f"lenslets, {rec.build_seconds:.1f} s"
-        )
+        return f"built in {rec.build_seconds:.1f} s: {self._built_text(job, rec)}"
 
     def show_psf(self, *_):
         """Add the chosen lenslet's PSF stack (z, y, x) as a layer in µm, computed in a worker."""

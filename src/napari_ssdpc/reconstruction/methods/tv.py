@@ -68,7 +68,7 @@ class TvMethod(PhaseMethod):
             phi_max=2 * math.pi * self.setup.dz_um * t.dn_max / self.setup.optics.wavelength_um,  # Δn = λφ/(2π dz)
             lam=t.lambda_scale,
             iterations=iterations,
-            progress=None if progress is None else (lambda i, n, *_: progress(i, n, "TV")),
+            progress=None if progress is None else (lambda i, n, label="TV", *_: progress(i, n, label)),
             should_stop=should_stop,
         )
         history = {"tv": {"objective": report.objective, "relative_change": report.relative_change}}
