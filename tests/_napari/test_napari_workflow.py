@@ -1,11 +1,13 @@
-"""The workflow as a user meets it: every widget opened from napari's Plugins menu.
+"""The workflow as a user meets it: the ssDPC dock opened from napari's Plugins menu.
 
-napari hands each plugin dock widget its own proxy of the viewer. The widgets must still share
-one session: the optics set in one, the calibration made in another and the reconstruction in a
-third.
+napari hands a plugin dock widget its own proxy of the viewer. The dock's tabs and any widget a
+script makes on the viewer must still share one session: the optics set in one, the calibration
+made in another and the reconstruction in a third.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,22 +23,39 @@ from napari_ssdpc._napari.widgets import session as _session
 from napari_ssdpc.physics.design import design
 
 Z, DZ = (-10.0, 10.0), 2.0
-MENU = ("1. Optics", "2. Calibrate", "3. Operators", "4. Reconstruct", "5. Line profile")
+FIRST_WINDOW = (1089, 633)  # napari's first window on a 1280 x 800 screen, px
 
 
-def test_widgets_opened_from_the_plugins_menu_share_one_session_and_reach_an_ri_volume(
+def _dock_tabs(viewer):
+    """The ssDPC dock opened from the Plugins menu: its tabs as 'optics', 'calibrate', 'operators', ..."""
+    _, dock = viewer.window.add_plugin_dock_widget("napari-ssdpc", "ssDPC")
+    w = {k.lower(): v for k, v in dock.tabs.items()}
+    w["operators"] = w["method"]
+    return dock, w
+
+
+def test_the_plugins_menu_holds_the_dock_only():
+    from npe2 import PluginManifest
+
+    import napari_ssdpc
+
+    manifest = PluginManifest.from_file(Path(napari_ssdpc.__file__).parent / "napari.yaml")
+    assert [w.display_name for w in manifest.contributions.widgets] == ["ssDPC"]
+
+
+def test_the_dock_and_widgets_made_by_a_script_share_one_session_and_reach_an_ri_volume(
     make_napari_viewer, qtbot, monkeypatch
 ):
     shown = []
     monkeypatch.setattr(_notify, "error", lambda msg: shown.append(str(msg)))
     viewer = make_napari_viewer()
-    w = {}
-    for name in MENU:
-        _, widget = viewer.window.add_plugin_dock_widget("napari-ssdpc", name)
-        w[name.split(". ")[1].lower()] = widget.inner  # the step inside its scrolling dock
+    dock, w = _dock_tabs(viewer)  # napari hands the dock a proxy of the viewer
+    for name, cls in (("operators", _widgets.OperatorsWidget), ("reconstruct", _widgets.ReconstructWidget)):
+        w[name] = cls(viewer)  # a script's widgets, on the viewer itself
+        viewer.window.add_dock_widget(w[name], name=name)
     sessions = {id(x.session) for x in w.values() if hasattr(x, "session")}
     assert len(sessions) == 1  # one model for the viewer, whatever proxy each widget was given
-    assert next(iter(w.values())).session is _widgets.session_for(viewer)
+    assert dock.session is _widgets.session_for(viewer)
 
     frame, flat, white, optics = _sample_data.bead_frames()
     _steps.prepare_bead(viewer, qtbot, w, optics, Z, DZ)  # the optics are set in Optics, read by the others
@@ -64,26 +83,23 @@ def test_widgets_opened_from_the_plugins_menu_share_one_session_and_reach_an_ri_
 
 def test_the_ssdpc_dock_runs_the_workflow_and_fits_a_laptop_screen(make_napari_viewer, qtbot, monkeypatch, tmp_path):
     """The one dock from the Plugins menu: its tabs are the shared widgets, its settings file is the
-    one the command line reads, and with every dock open the window stays within 1280 x 800."""
+    one the command line reads, and at napari's first window size it leaves the canvas 450 px or more."""
     from napari_ssdpc._napari.placement import scale_bar
-    from napari_ssdpc._napari.widgets.dock import SsdpcDock
+    from napari_ssdpc._napari.widgets.dock import DOCK_WIDTH_PX, SsdpcDock
     from napari_ssdpc.settings.config import RunConfig
 
     shown = []
     monkeypatch.setattr(_notify, "error", lambda msg: shown.append(str(msg)))
     viewer = make_napari_viewer(show=True)
     window = viewer.window._qt_window
-    window.resize(1280, 800)
-    _, dock = viewer.window.add_plugin_dock_widget("napari-ssdpc", "ssDPC")
+    window.resize(*FIRST_WINDOW)
+    dock, w = _dock_tabs(viewer)
     assert isinstance(dock, SsdpcDock) and dock.session is _widgets.session_for(viewer)
-    for name in MENU:  # and every separate widget too
-        viewer.window.add_plugin_dock_widget("napari-ssdpc", name)
     qtbot.wait(200)
     size = window.size()
-    assert size.width() <= 1280 and size.height() <= 800, (size.width(), size.height())
-
-    w = {k.lower(): v for k, v in dock.tabs.items()}
-    w["operators"] = w["method"]
+    assert (size.width(), size.height()) == FIRST_WINDOW  # the dock fits: the window did not grow
+    canvas = viewer.window._qt_viewer.canvas.native.width()
+    assert dock.width() <= DOCK_WIDTH_PX + 20 and canvas >= 450, (dock.width(), canvas)  # was 430 and 362
     frame, flat, white, optics = _sample_data.bead_frames()
     _steps.prepare_bead(viewer, qtbot, w, optics, Z, DZ)
     w["operators"].sign.value, w["operators"].tv_iterations.value = "lighter", 25
@@ -132,10 +148,7 @@ def test_a_series_streams_to_ome_zarr_and_is_shown_from_disk(make_napari_viewer,
     shown = []
     monkeypatch.setattr(_notify, "error", lambda msg: shown.append(str(msg)))
     viewer = make_napari_viewer()
-    w = {}
-    for name in MENU[:4]:
-        _, widget = viewer.window.add_plugin_dock_widget("napari-ssdpc", name)
-        w[name.split(". ")[1].lower()] = widget.inner  # the step inside its scrolling dock
+    _, w = _dock_tabs(viewer)
     frame, flat, white, optics = _sample_data.bead_frames()
     _steps.prepare_bead(viewer, qtbot, w, optics, Z, DZ)
     viewer.add_image(np.stack([frame, frame, frame]), name="bead series", axis_labels=("t", "y", "x"))

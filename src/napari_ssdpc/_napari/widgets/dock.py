@@ -1,17 +1,20 @@
 """The ssDPC dock: the whole workflow in one dock, as tabs (optics, calibrate, method, reconstruct,
 slices, profile, movie), with the settings file the command line reads.
 
-Each tab holds one of the widgets that can also be opened on its own; all of them share the
-viewer's :class:`~napari_ssdpc._napari.widgets.session.Session`, so the dock and any separate
-widget always agree. The tabs scroll, so the dock fits a laptop screen (1280 x 800) whatever the
-tab's length. The settings of the last run are remembered for the next napari session.
+It is the plugin's one entry in napari's Plugins menu. Each tab is a widget of its own (scripts can
+make them directly, e.g. ``CalibrateWidget(viewer)``); all of them share the viewer's
+:class:`~napari_ssdpc._napari.widgets.session.Session`, so the dock and any separate widget always
+agree. The dock asks for :data:`DOCK_WIDTH_PX` and its tabs scroll (down, and sideways when dragged
+narrower), so napari's first window (1089 x 633 px on a 1280 x 800 screen) keeps a 492 px wide canvas
+beside it. The settings of the last run are remembered for the next napari session.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from qtpy.QtWidgets import QFileDialog, QHBoxLayout, QPushButton, QScrollArea, QTabWidget, QVBoxLayout, QWidget
+from qtpy.QtCore import QSize
+from qtpy.QtWidgets import QFileDialog, QHBoxLayout, QMenu, QPushButton, QScrollArea, QTabWidget, QVBoxLayout, QWidget
 
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.placement import place_frames
@@ -27,19 +30,12 @@ from napari_ssdpc._napari.widgets.slices import SlicesWidget
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.settings.config import RunConfig
 
-__all__ = [
-    "DOCK_WIDTH_PX",
-    "Scrolling",
-    "SsdpcDock",
-    "CalibrateDock",
-    "OperatorsDock",
-    "OpticsDock",
-    "ProfileDock",
-    "ReconstructDock",
-]
+__all__ = ["DOCK_MIN_WIDTH_PX", "DOCK_WIDTH_PX", "SsdpcDock"]
 
-#: Width the dock asks for: room for a label and a spin box, the rest of a laptop screen for the canvas.
-DOCK_WIDTH_PX = 360
+#: Width the dock asks for: room for a label and a spin box (napari's first window keeps a 492 px canvas).
+DOCK_WIDTH_PX = 300
+#: Narrowest the dock can be dragged: a tab wider than this scrolls sideways.
+DOCK_MIN_WIDTH_PX = 240
 #: The dock's tabs: (title, widget class).
 TABS = (
     ("Optics", OpticsWidget),
@@ -58,67 +54,6 @@ def _scrolling(widget: QWidget) -> QScrollArea:
     area.setWidget(widget)
     area.setMinimumHeight(MIN_DOCK_HEIGHT_PX)
     return area
-
-
-class Scrolling(QWidget):
-    """One step's widget in its scroll area, as napari docks it from the Plugins menu.
-
-    napari docks a magicgui widget's content, not the scroll area around it; this hands napari the
-    scroll area, so that every dock can shrink and the window fits a laptop screen.
-
-    Parameters
-    ----------
-    widget : magicgui Container (made scrollable) or QWidget
-        The step's widget.
-
-    Attributes
-    ----------
-    inner : magicgui Container or QWidget
-        The step's widget.
-    """
-
-    def __init__(self, widget):
-        super().__init__()
-        self.inner = widget
-        area = widget.root_native_widget if hasattr(widget, "root_native_widget") else _scrolling(widget)
-        layout = QVBoxLayout(self)
-        layout.setContentsMargins(0, 0, 0, 0)
-        layout.addWidget(area)
-
-
-class OpticsDock(Scrolling):
-    """The Optics step as a dock of its own (Plugins menu)."""
-
-    def __init__(self, napari_viewer):
-        super().__init__(OpticsWidget(napari_viewer))
-
-
-class CalibrateDock(Scrolling):
-    """The Calibrate step as a dock of its own (Plugins menu)."""
-
-    def __init__(self, napari_viewer):
-        super().__init__(CalibrateWidget(napari_viewer))
-
-
-class OperatorsDock(Scrolling):
-    """The Method (operators) step as a dock of its own (Plugins menu)."""
-
-    def __init__(self, napari_viewer):
-        super().__init__(OperatorsWidget(napari_viewer))
-
-
-class ReconstructDock(Scrolling):
-    """The Reconstruct step as a dock of its own (Plugins menu)."""
-
-    def __init__(self, napari_viewer):
-        super().__init__(ReconstructWidget(napari_viewer))
-
-
-class ProfileDock(Scrolling):
-    """The line profile as a dock of its own (Plugins menu)."""
-
-    def __init__(self, napari_viewer):
-        super().__init__(ProfileWidget(napari_viewer))
 
 
 class SsdpcDock(QWidget):
@@ -143,27 +78,31 @@ class SsdpcDock(QWidget):
         self.tab_widget = QTabWidget()
         self.tab_widget.setUsesScrollButtons(True)
         for title, w in self.tabs.items():  # the magicgui steps scroll themselves
-            self.tab_widget.addTab(w.root_native_widget if hasattr(w, "native") else _scrolling(w), title)
+            page = w.root_native_widget if hasattr(w, "native") else _scrolling(w)
+            page.setMinimumWidth(DOCK_MIN_WIDTH_PX - 10)  # narrower than its content: it scrolls sideways
+            self.tab_widget.addTab(page, title)
         buttons = QHBoxLayout()
-        for text, tip, slot in (
-            ("Open raw…", "open a raw light-field frame or (t, y, x) series (TIFF)", self._open_raw_dialog),
-            ("Load settings…", "read optics and reconstruction settings (ssdpc --config YAML)", self._load_dialog),
-            (
-                "Save settings…",
-                "write optics and reconstruction settings for ssdpc reconstruct --config",
-                self._save_dialog,
-            ),
-        ):
-            b = QPushButton(text)
-            b.setToolTip(tip)
-            b.clicked.connect(slot)
+        open_raw = QPushButton("Open raw…")
+        open_raw.setToolTip("open a raw light-field frame or (t, y, x) series (TIFF)")
+        open_raw.clicked.connect(self._open_raw_dialog)
+        settings = QPushButton("Settings")  # a menu: the dock stays narrow
+        settings.setToolTip("load or save the optics and reconstruction settings (ssdpc reconstruct --config YAML)")
+        menu = QMenu(settings)
+        menu.addAction("Load settings…", self._load_dialog)
+        menu.addAction("Save settings…", self._save_dialog)
+        settings.setMenu(menu)
+        for b in (open_raw, settings):
             buttons.addWidget(b)
         layout = QVBoxLayout(self)
         layout.setContentsMargins(2, 2, 2, 2)
         layout.addLayout(buttons)
         layout.addWidget(self.tab_widget)
-        self.setMinimumWidth(DOCK_WIDTH_PX)
+        self.setMinimumWidth(DOCK_MIN_WIDTH_PX)
         self._restore()
+
+    def sizeHint(self) -> QSize:
+        """The width napari gives the dock when it opens: :data:`DOCK_WIDTH_PX` (the tabs scroll)."""
+        return QSize(DOCK_WIDTH_PX, super().sizeHint().height())
 
     # ------------------------------------------------------------------ settings
     def save_settings(self, path) -> Path | None:
