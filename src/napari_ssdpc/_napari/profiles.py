@@ -23,6 +23,7 @@ from scipy import ndimage
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.widgets.choices import LayerChoice, result_layer_choices
 from napari_ssdpc._napari.widgets.common import MIN_DOCK_HEIGHT_PX
+from napari_ssdpc._napari.widgets.plot import LazyFigure
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.files import atomic_write
 
@@ -123,9 +124,6 @@ class ProfileWidget(QWidget):
 
     def __init__(self, napari_viewer):
         super().__init__()
-        from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
-        from matplotlib.figure import Figure
-
         self.viewer = napari_viewer
         self.image = LayerChoice(
             label="image",
@@ -148,14 +146,11 @@ class ProfileWidget(QWidget):
         self.controls = Container(
             widgets=[self.image, self.lines, self.new_button, self.path, self.export_button, self.info]
         )
-        self.figure = Figure(figsize=(4, 3), tight_layout=True)
-        self.canvas = FigureCanvasQTAgg(self.figure)
-        self.canvas.setMinimumHeight(220)
-        self.axes = self.figure.add_subplot(1, 1, 1)
         inner = QWidget()
         column = QVBoxLayout(inner)
         column.addWidget(self.controls.native)
-        column.addWidget(self.canvas)
+        self.plot = LazyFigure(column, (4, 3), 220)  # made with the first profile drawn
+        self._axes = None
         area = QScrollArea()  # the dock may be short (a laptop screen, other docks open): scroll
         area.setWidgetResizable(True)
         area.setWidget(inner)
@@ -284,7 +279,16 @@ class ProfileWidget(QWidget):
             self.info.value = f"{len(self.profiles)} line(s)" if self.profiles else "draw a line in the lines layer"
         self._plot()
 
+    @property
+    def axes(self):
+        """The matplotlib Axes of the profiles."""
+        if self._axes is None:
+            self._axes = self.plot.figure.add_subplot(1, 1, 1)
+        return self._axes
+
     def _plot(self):
+        if not self.profiles and not self.plot.made:  # nothing to draw yet: matplotlib can wait
+            return
         ax = self.axes
         ax.clear()
         img = self.image.value
@@ -295,7 +299,7 @@ class ProfileWidget(QWidget):
         ax.set_ylabel(info.get("unit") or (img.name if img is not None else "value"))
         if self.profiles:
             ax.legend(fontsize=8)
-        self.canvas.draw_idle()
+        self.plot.draw()
 
     def export_csv(self, path):
         """Write all profiles: line, orientation, sample, distance_um, world coordinates (µm; t in

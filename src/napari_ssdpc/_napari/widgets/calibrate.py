@@ -117,6 +117,8 @@ class CalibrateWidget(StepWidget):
             return None
 
         def work(progress, should_stop):
+            import pandas  # noqa: F401  (napari's Points features need it: imported here, not on the GUI thread)
+
             from napari_ssdpc.calibration import calibrate
 
             progress(0, 1, "calibrating" if guess is None else f"calibrating from {len(guess)} guide points")

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from qtpy.QtCore import QSize
+from qtpy.QtCore import QSize, QTimer
 from qtpy.QtWidgets import QFileDialog, QHBoxLayout, QMenu, QPushButton, QScrollArea, QTabWidget, QVBoxLayout, QWidget
 
 from napari_ssdpc._napari import notify
@@ -24,6 +24,7 @@ from napari_ssdpc._napari.widgets.common import MIN_DOCK_HEIGHT_PX
 from napari_ssdpc._napari.widgets.movie import MovieWidget
 from napari_ssdpc._napari.widgets.operators import OperatorsWidget
 from napari_ssdpc._napari.widgets.optics import OpticsWidget
+from napari_ssdpc._napari.widgets.plot import preload_matplotlib
 from napari_ssdpc._napari.widgets.reconstruct import ReconstructWidget
 from napari_ssdpc._napari.widgets.session import remembered_settings_path, session_for
 from napari_ssdpc._napari.widgets.slices import SlicesWidget
@@ -72,6 +73,8 @@ class SsdpcDock(QWidget):
 
     def __init__(self, napari_viewer):
         super().__init__()
+        # the Slices and Profile plots: matplotlib imported beside the GUI thread once the dock is up
+        QTimer.singleShot(0, preload_matplotlib)
         self.viewer = napari_viewer
         self.session = session_for(napari_viewer)
         self.tabs = {title: cls(napari_viewer) for title, cls in TABS}

@@ -14,6 +14,7 @@ from qtpy.QtWidgets import QVBoxLayout, QWidget
 
 from napari_ssdpc._napari.widgets.choices import LayerChoice, result_layer_choices
 from napari_ssdpc._napari.widgets.common import MIN_DOCK_HEIGHT_PX, follow_layers, wrap
+from napari_ssdpc._napari.widgets.plot import LazyFigure
 
 __all__ = ["SlicesWidget", "sections"]
 
@@ -61,9 +62,6 @@ class SlicesWidget(QWidget):
 
     def __init__(self, napari_viewer):
         super().__init__()
-        from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
-        from matplotlib.figure import Figure
-
         self.viewer = napari_viewer
         self.layer = LayerChoice(
             label="volume",
@@ -72,16 +70,18 @@ class SlicesWidget(QWidget):
         )
         self.info = wrap(Label(value=""))
         self.controls = Container(widgets=[self.layer, self.info])
-        self.figure = Figure(figsize=(4, 5), tight_layout=True)
-        self.canvas = FigureCanvasQTAgg(self.figure)
-        self.canvas.setMinimumHeight(2 * MIN_DOCK_HEIGHT_PX)
         layout = QVBoxLayout(self)
         layout.addWidget(self.controls.native)
-        layout.addWidget(self.canvas)
+        self.plot = LazyFigure(layout, (4, 5), 2 * MIN_DOCK_HEIGHT_PX)  # made with the first section drawn
         follow_layers(napari_viewer, self.controls)
         self.layer.changed.connect(lambda *_: self.update())
         napari_viewer.dims.events.current_step.connect(lambda *_: self.update())
         napari_viewer.mouse_drag_callbacks.append(self._clicked)
+
+    @property
+    def figure(self):
+        """The matplotlib Figure of the sections."""
+        return self.plot.figure
 
     def _clicked(self, viewer, event):
         """A click in the canvas moves the sections to that position."""
@@ -91,11 +91,13 @@ class SlicesWidget(QWidget):
     def update(self) -> None:
         """Draw the sections of the chosen volume through the current point."""
         layer = self.layer.value
-        self.figure.clear()
         if layer is None:
             self.info.value = "reconstruct a frame: its xz and yz sections appear here"
-            self.canvas.draw_idle()
+            if self.plot.made:
+                self.figure.clear()
+                self.plot.draw()
             return
+        self.figure.clear()
         point = np.array(self.viewer.dims.point, float)
         clicked = getattr(self, "_point", None)
         if clicked is not None and len(clicked) == len(point):
@@ -113,7 +115,7 @@ class SlicesWidget(QWidget):
         dz, dy, dx = layer.scale[-3:]
         z0, y0, x0 = layer.translate[-3:]
         self.info.value = f"through z {z0 + z * dz:.1f} µm, y {y0 + y * dy:.1f} µm, x {x0 + x * dx:.1f} µm"
-        self.canvas.draw_idle()
+        self.plot.draw()
 
 
 def _mpl_cmap(name: str) -> str:
