@@ -8,7 +8,7 @@ import pytest
 PKG = Path(__file__).resolve().parents[1] / "src" / "napari_ssdpc"
 GUI = ("napari", "magicgui", "qtpy", "PyQt5", "PyQt6", "PySide2", "PySide6", "superqt", "vispy")
 #: layer -> layers it must not import
-_TOP = ("cli", "_napari", "validation")
+_TOP = ("analysis", "cli", "_napari", "validation")
 FORBIDDEN = {
     "settings": ("physics", "calibration", "reconstruction", "simulation", "io", "pipeline", *_TOP),
     "physics": ("calibration", "reconstruction", "simulation", "io", "pipeline", *_TOP),
@@ -19,6 +19,8 @@ FORBIDDEN = {
     "io": ("physics", "calibration", "reconstruction", "simulation", "pipeline", *_TOP),
     # the frame loop runs on measured frames: it knows no simulator and no user interface
     "pipeline": ("simulation", *_TOP),
+    # measurements read stored volumes: no solver, no frame loop, no simulator, no user interface
+    "analysis": ("calibration", "reconstruction", "simulation", "pipeline", "cli", "_napari", "validation"),
     "cli": ("_napari",),
     "_napari": ("cli",),
     "validation": ("cli", "_napari"),

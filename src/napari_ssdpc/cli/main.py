@@ -24,6 +24,7 @@ from napari_ssdpc.cli.commands import (
     cmd_resign,
     cmd_simulate,
 )
+from napari_ssdpc.cli.measure import add_measure_command
 from napari_ssdpc.cli.options import add_reconstruction_options
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 
@@ -152,6 +153,7 @@ def build_parser():
         "--overwrite", action="store_true", help="replace files in the folder that napari-ssdpc did not write"
     )
     s.set_defaults(func=cmd_demo)
+    add_measure_command(sub)
     return p
 
 

@@ -1,0 +1,135 @@
+"""Objects measured on the phantoms' own Δn, blurred to the resolution and with noise: dry mass,
+volume and centroid against the analytic truth; tracks over a moving series."""
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from napari_ssdpc.analysis.objects import FWHM_PER_SIGMA, ObjectRule, measure_objects, noise_sigma, segment
+from napari_ssdpc.analysis.table import measure_series
+from napari_ssdpc.analysis.tracks import link_tracks
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.simulation import phantoms
+
+DX = 0.8456  # µm, the paper's object pixel
+Z = np.arange(-40.0, 41.0, 1.0)
+Y = X = (np.arange(128) - 63.5) * DX
+RESOLUTION = ObjectRule().resolution_um  # (FWHM_z, FWHM_xy), µm
+ALPHA = 0.19  # µm³/pg
+SNR = 50  # the objects' Δn over the noise σ
+
+
+def _truth(phantom):
+    """(∫Δn dV µm³, volume µm³ of the outer body, Δn-weighted centroid (x, y, z) µm), analytic."""
+    parts = phantom.parts(phantom.medium())
+    weights = [p.dn.real * 4 / 3 * np.pi * np.prod(p.semi_axes_um) for p in parts]
+    centroid = np.average([p.center_um for p in parts], axis=0, weights=weights)
+    return sum(weights), 4 / 3 * np.pi * np.prod(parts[0].semi_axes_um), centroid
+
+
+def _observed(phantom, seed=0, resolution=RESOLUTION):
+    """The phantom's Δn blurred by a Gaussian of the resolution's FWHM, with noise of Δn/SNR."""
+    dn = phantom.volume(Z, Y, X).real
+    fz, fxy = resolution
+    blurred = ndimage.gaussian_filter(dn, (fz / FWHM_PER_SIGMA, fxy / FWHM_PER_SIGMA / DX, fxy / FWHM_PER_SIGMA / DX))
+    sigma = phantom.parts(phantom.medium())[0].dn.real / SNR
+    return blurred + np.random.default_rng(seed).normal(0.0, sigma, dn.shape), sigma
+
+
+CASES = {
+    "weak bead": phantoms.weak_bead(center_um=(3.0, -2.0, 5.0)),
+    "12 µm weak bead": phantoms.Sphere((3.0, -2.0, 5.0), 12.0, 1.525, medium_index=1.518),
+    "cell": phantoms.cell(center_um=(-4.0, 6.0, -3.0)),
+    "moving sample, frame 0": phantoms.moving_sample(20)[0],
+    "moving sample, frame 10": phantoms.moving_sample(20)[10],
+}
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_dry_mass_volume_and_centroid_of_weak_objects(name):
+    phantom = CASES[name]
+    mass, volume, centroid = _truth(phantom)
+    dn, sigma = _observed(phantom)
+    n_medium = phantom.medium()
+    objects = measure_objects(dn, Z, Y, X, n_medium=n_medium, refraction_increment_um3_pg=ALPHA)
+    assert len(objects) == 1, [o["voxels"] for o in objects]  # one object, no specks of noise
+    o = objects[0]
+    assert o["noise_dn"] == pytest.approx(sigma, rel=0.05)
+    assert o["dry_mass_pg"] == pytest.approx(mass / ALPHA, rel=0.1)  # measured 0.99-1.00
+    assert o["integrated_dn_um3"] == pytest.approx(mass, rel=0.1)
+    assert np.linalg.norm([o["x_um"] - centroid[0], o["y_um"] - centroid[1], o["z_um"] - centroid[2]]) < 0.5
+    if name == "weak bead":  # 6 µm across, 10 µm axial resolution: no volume (docs/measurements.md)
+        assert np.isnan(o["volume_um3"]) and np.isnan(o["mean_ri"])
+    else:
+        assert o["volume_um3"] == pytest.approx(volume, rel=0.1)  # measured 0.94-1.05 (seed 0)
+        assert o["mean_ri"] == pytest.approx(n_medium + mass / volume, abs=0.1 * mass / volume)
+    assert n_medium < o["peak_ri"] < n_medium + max(p.dn.real for p in phantom.parts(n_medium)) * 1.5
+
+
+def test_noise_is_robust_to_the_objects_and_thresholds_follow_it():
+    dn, sigma = _observed(CASES["cell"])
+    assert noise_sigma(dn) == pytest.approx(sigma, rel=0.05)
+    labels, s = segment(dn, (1.0, DX, DX))
+    assert labels.max() == 1 and s == pytest.approx(sigma, rel=0.05)
+    # a threshold far above the object finds nothing; noise alone is not an object
+    assert segment(dn, (1.0, DX, DX), ObjectRule(k=1000, k_low=1000))[0].max() == 0
+    pure = np.random.default_rng(3).normal(0, 1e-3, dn.shape)
+    assert segment(pure, (1.0, DX, DX))[0].max() == 0
+
+
+def test_lighter_objects_and_two_objects_in_one_volume():
+    beads = phantoms.Spheres(
+        (phantoms.Sphere((-20.0, 0.0, -10.0), 10.0, 1.51), phantoms.Sphere((20.0, 5.0, 10.0), 8.0, 1.51)),
+        medium_index=1.518,
+    )
+    dn = ndimage.gaussian_filter(beads.volume(Z, Y, X).real, (4.2, 2.0, 2.0))
+    dn += np.random.default_rng(0).normal(0, 1e-4, dn.shape)
+    assert measure_objects(dn, Z, Y, X, n_medium=1.518) == []  # denser objects: none
+    objects = measure_objects(dn, Z, Y, X, n_medium=1.518, rule=ObjectRule(sign="lighter"))
+    assert len(objects) == 2
+    big, small = objects  # largest first
+    assert big["x_um"] == pytest.approx(-20, abs=0.5) and small["x_um"] == pytest.approx(20, abs=0.5)
+    truth = -0.008 * 4 / 3 * np.pi * 5**3
+    assert big["integrated_dn_um3"] == pytest.approx(truth, rel=0.1) and big["dry_mass_pg"] < 0
+    assert big["peak_ri"] < 1.518 and big["mean_ri"] == pytest.approx(1.51, abs=0.001)
+
+
+def test_an_object_below_the_resolution_has_no_volume_but_its_mass():
+    bead = phantoms.Sphere((0.0, 0.0, 0.0), 4.0, 1.56, medium_index=1.518)  # 4 µm < 0.7 x 10 µm
+    dn, _ = _observed(bead)
+    (o,) = measure_objects(dn, Z, Y, X, n_medium=1.518)
+    assert np.isnan(o["volume_um3"]) and np.isnan(o["mean_ri"])
+    assert o["integrated_dn_um3"] == pytest.approx(0.042 * 4 / 3 * np.pi * 2.0**3, rel=0.1)
+
+
+def test_a_moving_sample_gives_one_track_that_follows_the_truth():
+    series = phantoms.moving_sample(20)[:8]  # steps of 3.9 µm
+    frames = [(t, _observed(p, seed=t)[0]) for t, p in enumerate(series)]
+    rows = measure_series(frames, Z, Y, X, n_medium=1.33)
+    assert [r["t"] for r in rows] == list(range(8)) and {r["track"] for r in rows} == {1}
+    errors = [np.linalg.norm([r["x_um"], r["y_um"], r["z_um"]] - _truth(p)[2]) for r, p in zip(rows, series)]
+    assert max(errors) < 1.0  # measured at most 0.2 µm
+    masses = [r["dry_mass_pg"] for r in rows]
+    assert np.ptp(masses) < 0.05 * np.mean(masses)  # the same object all along
+
+
+def test_tracks_link_nearest_objects_and_split_beyond_the_step():
+    a = {"x_um": 0.0, "y_um": 0.0, "z_um": 0.0}
+    b = {"x_um": 30.0, "y_um": 0.0, "z_um": 0.0}
+    frames = [[a, b], [{**b, "x_um": 32.0}, {**a, "x_um": 3.0}], [{**a, "x_um": 20.0}]]
+    out = link_tracks(frames, max_step_um=10.0)
+    assert [o["track"] for o in out[0]] == [1, 2]
+    assert [o["track"] for o in out[1]] == [2, 1]  # matched by distance, not by order
+    assert [o["track"] for o in out[2]] == [3]  # 17 µm from track 1, 12 from track 2: a new track
+    with pytest.raises(SsdpcError, match="max step"):
+        link_tracks(frames, max_step_um=0)
+
+
+def test_bad_rules_are_one_line_errors():
+    for kw in ({"k": 2, "k_low": 3}, {"min_volume_um3": -1}, {"resolution_um": (-1, 4)}, {"sign": "up"}, {"noise": 0}):
+        with pytest.raises(SsdpcError):
+            ObjectRule(**kw)
+    with pytest.raises(SsdpcError, match="no background noise"):
+        segment(np.zeros((4, 5, 6)), (1.0, 1.0, 1.0))
+    with pytest.raises(SsdpcError, match="does not match"):
+        measure_objects(np.zeros((4, 5, 6)), Z, Y, X, n_medium=1.33)
