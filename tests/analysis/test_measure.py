@@ -1,72 +1,24 @@
 """`ssdpc measure` and ``measure_result``: results written by the product's own sinks (a series
 store, an OME-TIFF) are read back, measured and tabled; bad input and foreign files are refused."""
 
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
 import tifffile
 import zarr
-from scipy import ndimage
 
+from analysis_store import ALPHA, N_MEDIUM, X, Y, Z, result, run_settings, source, truth, write_moving_store
 from napari_ssdpc._version import SOFTWARE
-from napari_ssdpc.analysis.objects import FWHM_PER_SIGMA
 from napari_ssdpc.analysis.result_files import open_result
 from napari_ssdpc.analysis.table import COLUMNS, csv_path, measure_result, read_csv
 from napari_ssdpc.cli.main import main
-from napari_ssdpc.pipeline.sinks import OmeTiffSink, OutputGrid, ZarrSink
-from napari_ssdpc.reconstruction.reconstructor import Result
-from napari_ssdpc.settings.config import RunConfig
-from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.pipeline.sinks import OmeTiffSink
 from napari_ssdpc.simulation import phantoms
-
-DX = 0.8456
-Z = np.arange(-30.0, 31.0, 1.0)
-Y = X = (np.arange(112) - 55.5) * DX
-ALPHA = 0.2  # µm³/pg, as the result was "reconstructed" with (not the default 0.19)
-N_MEDIUM = 1.33
-
-
-def _settings():
-    config = RunConfig.of(Optics.paper().replace(medium_index=N_MEDIUM), z_min_um=-30, z_max_um=30, dz_um=1)
-    return {**config.reconstruction.to_dict(), "refraction_increment_um3_pg": ALPHA}, config.optics.to_dict()
-
-
-def _result(phantom, seed):
-    """A Result holding the phantom's Δn blurred to (10, 4) µm FWHM, with noise of 1/50 of its Δn."""
-    dn = phantom.volume(Z, Y, X).real
-    s = (10.0 / FWHM_PER_SIGMA, 4.0 / FWHM_PER_SIGMA / DX, 4.0 / FWHM_PER_SIGMA / DX)
-    dn = ndimage.gaussian_filter(dn, s) + np.random.default_rng(seed).normal(0, 0.03 / 50, dn.shape)
-    dn = dn.astype(np.float32)
-    settings, _ = _settings()
-    return Result(N_MEDIUM + dn, dn, dn, None, {}, {}, Z, Y, X, settings=settings)
-
-
-def _truth(phantom):
-    parts = phantom.parts(N_MEDIUM)
-    weights = [p.dn.real * 4 / 3 * np.pi * np.prod(p.semi_axes_um) for p in parts]
-    return sum(weights), np.average([p.center_um for p in parts], axis=0, weights=weights)
-
-
-def _source(n):
-    ident = {"path": "raw.tif", "size": 1, "mtime_ns": 1, "frames": n, "sha256": "0" * 64}
-    return SimpleNamespace(
-        available=lambda: n, finished=lambda: True, identity=lambda: ident, frame_shape=(8, 8), name="raw.tif"
-    )
 
 
 @pytest.fixture(scope="module")
 def store(tmp_path_factory):
-    """A 6-frame store of the moving sample written by ZarrSink, frames 0-4 complete (5 never written)."""
-    series = phantoms.moving_sample(20)[:6]
-    out = tmp_path_factory.mktemp("measure") / "cells.zarr"
-    settings, optics = _settings()
-    sink = ZarrSink(out, meta={"software": SOFTWARE, "optics": optics})
-    sink.open(SimpleNamespace(result_key="k"), OutputGrid(Z, Y, X, settings), _source(6))
-    for t, p in enumerate(series[:5]):
-        sink.write(t, _result(p, t))
-    sink.close()
-    return out, series
+    out = write_moving_store(tmp_path_factory.mktemp("measure") / "cells.zarr")
+    return out, phantoms.moving_sample(20)[:6]
 
 
 def test_a_series_store_gives_one_track_with_the_truth_s_mass_and_path(store, capsys):
@@ -79,7 +31,7 @@ def test_a_series_store_gives_one_track_with_the_truth_s_mass_and_path(store, ca
     assert [r["t"] for r in rows] == [0, 1, 2, 3, 4]  # frame 5 is not marked done: not measured
     assert {r["track"] for r in rows} == {1}
     for r, p in zip(rows, series):
-        mass, centroid = _truth(p)
+        mass, centroid = truth(p)
         assert r["dry_mass_pg"] == pytest.approx(mass / ALPHA, rel=0.1)  # the result's α, not 0.19
         assert np.linalg.norm([r["x_um"] - centroid[0], r["y_um"] - centroid[1], r["z_um"] - centroid[2]]) < 1.0
         assert r["volume_um3"] == pytest.approx(4 / 3 * np.pi * 9 * 5 * 4, rel=0.15)
@@ -95,20 +47,20 @@ def test_the_grid_is_read_back_as_written(store):
     np.testing.assert_allclose(stored.x_um, X, rtol=1e-4, atol=1e-4)
     t, dn = next(iter(stored))
     assert t == 0 and dn.shape == (len(Z), len(Y), len(X))
-    np.testing.assert_allclose(dn, _result(phantoms.moving_sample(20)[0], 0).delta_n, atol=1e-6)
+    np.testing.assert_allclose(dn, result(phantoms.moving_sample(20)[0], 0).delta_n, atol=1e-6)
 
 
 def test_an_ome_tiff_frame_and_the_python_api(tmp_path):
     cell = phantoms.cell(center_um=(5.0, -4.0, 2.0))
-    _, optics = _settings()
+    _, optics = run_settings()
     out = tmp_path / "cell.ome.tif"
     sink = OmeTiffSink({"ri": out}, {"software": SOFTWARE, "optics": optics})
-    sink.open(None, None, _source(1))
-    sink.write(0, _result(cell, 0))
+    sink.open(None, None, source(1))
+    sink.write(0, result(cell, 0))
     rows, path = measure_result(out)
     assert path == tmp_path / "cell_objects.csv"
     (r,) = rows
-    mass, centroid = _truth(cell)
+    mass, centroid = truth(cell)
     assert r["t"] == 0 and r["track"] == 1
     assert r["dry_mass_pg"] == pytest.approx(mass / ALPHA, rel=0.1)
     assert r["volume_um3"] == pytest.approx(4 / 3 * np.pi * 12 * 8 * 5, rel=0.1)
@@ -156,10 +108,10 @@ def test_what_is_not_a_result_is_one_line(tmp_path, capsys):
 
 def test_a_phase_file_and_bad_options_are_one_line(tmp_path, store, capsys):
     cell = phantoms.cell()
-    _, optics = _settings()
+    _, optics = run_settings()
     sink = OmeTiffSink({"ri": tmp_path / "c.ome.tif", "phase": tmp_path / "c_phase.ome.tif"}, {"optics": optics})
-    sink.open(None, None, _source(1))
-    sink.write(0, _result(cell, 0))
+    sink.open(None, None, source(1))
+    sink.write(0, result(cell, 0))
     assert "not RI or Δn" in _one_line(capsys, ["measure", tmp_path / "c_phase.ome.tif"])
     assert "k_low" in _one_line(capsys, ["measure", store[0], "--k", "2", "--k-low", "3"])
     assert "max step" in _one_line(capsys, ["measure", store[0], "--max-step", "0"])

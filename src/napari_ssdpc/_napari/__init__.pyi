@@ -1,10 +1,12 @@
 from . import (
     layers,
     notify,
+    objects_dock,
     placement,
     profiles,
     reader,
     sample_data,
+    tracks,
     widgets,
     writer,
 )
@@ -12,10 +14,12 @@ from . import (
 __all__ = [
     "layers",
     "notify",
+    "objects_dock",
     "placement",
     "profiles",
     "reader",
     "sample_data",
+    "tracks",
     "widgets",
     "writer",
 ]

@@ -19,7 +19,7 @@ from napari_ssdpc.analysis.result_files import open_result
 from napari_ssdpc.analysis.tracks import DEFAULT_MAX_STEP_UM, link_tracks
 from napari_ssdpc.errors import SsdpcError
 
-__all__ = ["COLUMNS", "csv_path", "measure_result", "measure_series", "read_csv", "write_csv"]
+__all__ = ["COLUMNS", "csv_path", "is_objects_table", "measure_result", "measure_series", "read_csv", "write_csv"]
 
 #: The CSV's columns, units in their names (docs/measurements.md).
 COLUMNS = (
@@ -120,8 +120,17 @@ def csv_path(result) -> Path:
     return result.with_name(f"{name}_objects.csv")
 
 
-def _is_our_table(path: Path) -> bool:
-    """A CSV whose header is ours (written by :func:`write_csv`)."""
+def is_objects_table(path) -> bool:
+    """Whether a file is an objects table napari-ssdpc wrote (its header is :data:`COLUMNS`).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    bool
+    """
     try:
         with open(path, encoding="utf-8") as f:
             return f.readline().strip() == ",".join(COLUMNS)
@@ -150,7 +159,7 @@ def write_csv(rows: list[dict], path, *, inputs: dict | None = None, overwrite: 
     from napari_ssdpc.files import atomic_write
     from napari_ssdpc.io.paths import check_outputs
 
-    path = check_outputs({"objects table": path}, inputs or {}, overwrite=overwrite, replaceable=_is_our_table)[
+    path = check_outputs({"objects table": path}, inputs or {}, overwrite=overwrite, replaceable=is_objects_table)[
         "objects table"
     ]
     with atomic_write(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as f:
@@ -222,7 +231,7 @@ def measure_result(
     stored = open_result(result)
     from napari_ssdpc.io.paths import check_outputs
 
-    check_outputs({"objects table": out}, {"result": result}, overwrite=overwrite, replaceable=_is_our_table)
+    check_outputs({"objects table": out}, {"result": result}, overwrite=overwrite, replaceable=is_objects_table)
     if not stored.frames:
         raise SsdpcError(f"{result} holds no complete frame yet; reconstruct it first")
     alpha = refraction_increment_um3_pg or stored.refraction_increment_um3_pg or REFRACTION_INCREMENT_UM3_PG
