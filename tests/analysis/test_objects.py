@@ -27,12 +27,14 @@ def _truth(phantom):
     return sum(weights), 4 / 3 * np.pi * np.prod(parts[0].semi_axes_um), centroid
 
 
-def _observed(phantom, seed=0, resolution=RESOLUTION):
-    """The phantom's Δn blurred by a Gaussian of the resolution's FWHM, with noise of Δn/SNR."""
+def _observed(phantom, seed=0, resolution=RESOLUTION, snr=SNR):
+    """The phantom's Δn blurred by a Gaussian of the resolution's FWHM, with noise of Δn/snr (None: none)."""
     dn = phantom.volume(Z, Y, X).real
     fz, fxy = resolution
     blurred = ndimage.gaussian_filter(dn, (fz / FWHM_PER_SIGMA, fxy / FWHM_PER_SIGMA / DX, fxy / FWHM_PER_SIGMA / DX))
-    sigma = phantom.parts(phantom.medium())[0].dn.real / SNR
+    if snr is None:
+        return blurred, 0.0
+    sigma = phantom.parts(phantom.medium())[0].dn.real / snr
     return blurred + np.random.default_rng(seed).normal(0.0, sigma, dn.shape), sigma
 
 
@@ -69,12 +71,31 @@ def test_dry_mass_volume_and_centroid_of_weak_objects(name):
 def test_noise_is_robust_to_the_objects_and_thresholds_follow_it():
     dn, sigma = _observed(CASES["cell"])
     assert noise_sigma(dn) == pytest.approx(sigma, rel=0.05)
-    labels, s = segment(dn, (1.0, DX, DX))
+    labels, s, low = segment(dn, (1.0, DX, DX))
     assert labels.max() == 1 and s == pytest.approx(sigma, rel=0.05)
+    assert low == pytest.approx(max(2.5 * s, 0.05 * dn.max()))
     # a threshold far above the object finds nothing; noise alone is not an object
     assert segment(dn, (1.0, DX, DX), ObjectRule(k=1000, k_low=1000))[0].max() == 0
     pure = np.random.default_rng(3).normal(0, 1e-3, dn.shape)
     assert segment(pure, (1.0, DX, DX))[0].max() == 0
+
+
+def test_a_sparse_background_without_noise_takes_the_thresholds_from_the_peak():
+    """As `tv` leaves it: most of the background exactly 0, a faint positive haze elsewhere."""
+    cell = CASES["cell"]
+    mass, volume, centroid = _truth(cell)
+    blurred = _observed(cell, snr=None)[0]
+    dn = np.where(blurred > 1e-6, blurred, 0.0)  # no noise: zeros and the object
+    haze = np.abs(np.random.default_rng(1).normal(0, 2e-4, dn.shape)) * (
+        np.random.default_rng(2).random(dn.shape) < 0.3
+    )
+    dn = dn + haze
+    assert noise_sigma(dn) < 1e-5  # the MAD sees zeros and haze: no noise to set a threshold by
+    (o,) = measure_objects(dn, Z, Y, X, n_medium=1.33)
+    assert o["threshold_dn"] == pytest.approx(0.05 * dn.max())
+    assert o["integrated_dn_um3"] == pytest.approx(mass, rel=0.1)
+    assert o["volume_um3"] == pytest.approx(volume, rel=0.1)
+    assert np.linalg.norm([o["x_um"] - centroid[0], o["y_um"] - centroid[1], o["z_um"] - centroid[2]]) < 0.5
 
 
 def test_lighter_objects_and_two_objects_in_one_volume():
@@ -126,10 +147,18 @@ def test_tracks_link_nearest_objects_and_split_beyond_the_step():
 
 
 def test_bad_rules_are_one_line_errors():
-    for kw in ({"k": 2, "k_low": 3}, {"min_volume_um3": -1}, {"resolution_um": (-1, 4)}, {"sign": "up"}, {"noise": 0}):
+    for kw in (
+        {"k": 2, "k_low": 3},
+        {"fraction": 0.1, "fraction_low": 0.2},
+        {"fraction": 1.0},
+        {"min_volume_um3": -1},
+        {"resolution_um": (-1, 4)},
+        {"sign": "up"},
+        {"noise": 0},
+    ):
         with pytest.raises(SsdpcError):
             ObjectRule(**kw)
-    with pytest.raises(SsdpcError, match="no background noise"):
+    with pytest.raises(SsdpcError, match="no background noise and no object"):
         segment(np.zeros((4, 5, 6)), (1.0, 1.0, 1.0))
     with pytest.raises(SsdpcError, match="does not match"):
         measure_objects(np.zeros((4, 5, 6)), Z, Y, X, n_medium=1.33)

@@ -4,9 +4,12 @@ The rule (docs/measurements.md):
 
 1. **Noise.** σ = 1.4826 · MAD(Δn) over the whole volume: a robust standard deviation of the
    background, unbiased while the objects fill less than about half of the voxels.
-2. **Objects.** Hysteresis thresholding of the signed Δn (``sign`` · Δn): a voxel above ``k_low`` σ
-   belongs to an object when it connects (26-connectivity) to a voxel above ``k`` σ; connected
-   components smaller than ``min_volume_um3`` are dropped (specks of noise).
+2. **Objects.** Hysteresis thresholding of the signed Δn (``sign`` · Δn): a voxel above the low
+   threshold belongs to an object when it connects (26-connectivity) to a voxel above the seed
+   threshold; connected components smaller than ``min_volume_um3`` are dropped (specks of noise).
+   The thresholds are ``k_low`` σ and ``k`` σ, but never below ``fraction_low`` and ``fraction`` of
+   the frame's peak signed Δn: a `tv` reconstruction sets most of the background exactly to zero
+   (σ ≈ 0) and leaves a faint haze around its objects, which the noise alone cannot tell apart.
 3. **Each object's region** is its component grown by the resolution, an ellipsoidal margin of one
    FWHM along each axis (no voxel given to two objects): the blurred tails of an object hold much
    of its Δn.
@@ -67,6 +70,10 @@ class ObjectRule:
         Seed threshold, in noise σ (5: about one noise voxel in 3.5 million passes).
     k_low : float
         Hysteresis threshold, in noise σ: the extent of an object around its seeds.
+    fraction : float
+        The seed threshold is at least this fraction of the frame's peak signed Δn.
+    fraction_low : float
+        The low threshold is at least this fraction of the frame's peak signed Δn.
     min_volume_um3 : float
         Components smaller than this (their voxels' volume, µm³) are dropped.
     resolution_um : (float, float)
@@ -80,6 +87,8 @@ class ObjectRule:
 
     k: float = 5.0
     k_low: float = 2.5
+    fraction: float = 0.2
+    fraction_low: float = 0.05
     min_volume_um3: float = 20.0
     resolution_um: tuple[float, float] = DEFAULT_RESOLUTION_UM
     sign: Literal["denser", "lighter"] = "denser"
@@ -88,6 +97,10 @@ class ObjectRule:
     def __post_init__(self):
         if not (np.isfinite(self.k) and np.isfinite(self.k_low) and 0 < self.k_low <= self.k):
             raise SsdpcError(f"thresholds k {self.k}, k_low {self.k_low}: give 0 < k_low <= k (in noise σ)")
+        if not (0 <= self.fraction_low <= self.fraction < 1):
+            raise SsdpcError(
+                f"fractions {self.fraction}, {self.fraction_low} of the peak: give 0 <= fraction_low <= fraction < 1"
+            )
         if not self.min_volume_um3 >= 0:
             raise SsdpcError(f"min_volume_um3 {self.min_volume_um3}: give a volume >= 0 µm³")
         if len(self.resolution_um) != 2 or not all(np.isfinite(r) and r >= 0 for r in self.resolution_um):
@@ -138,7 +151,7 @@ def _voxel(z_um, y_um, x_um) -> tuple[float, float, float]:
     return spacing[0], spacing[1], spacing[2]
 
 
-def segment(delta_n, voxel_um, rule: ObjectRule = DEFAULT_RULE) -> tuple[np.ndarray, float]:
+def segment(delta_n, voxel_um, rule: ObjectRule = DEFAULT_RULE) -> tuple[np.ndarray, float, float]:
     """Label the objects of a Δn volume (steps 1-2 of the module's rule).
 
     Parameters
@@ -154,25 +167,31 @@ def segment(delta_n, voxel_um, rule: ObjectRule = DEFAULT_RULE) -> tuple[np.ndar
     labels : ndarray of int32, (z, y, x)
         0 for the background, 1..N the objects, largest first.
     sigma : float
-        The background σ of Δn the thresholds used.
+        The background σ of Δn.
+    low : float
+        The low threshold of the signed Δn (an object's extent).
     """
     d = np.asarray(delta_n, dtype=np.float32)
     if d.ndim != 3:
         raise SsdpcError(f"objects are segmented in a (z, y, x) volume, got shape {d.shape}")
     sigma = rule.noise if rule.noise is not None else noise_sigma(d)
-    if sigma <= 0:
-        raise SsdpcError("the Δn volume has no background noise to set a threshold by; give the noise σ (noise=...)")
+    signed = np.nan_to_num(rule.polarity * d, nan=0.0)
+    peak = max(float(signed.max()), 0.0)
+    low, high = max(rule.k_low * sigma, rule.fraction_low * peak), max(rule.k * sigma, rule.fraction * peak)
+    if not high > 0:
+        raise SsdpcError(
+            "the Δn volume has no background noise and no object to set a threshold by; give the noise σ (noise=...)"
+        )
     from skimage.filters import apply_hysteresis_threshold
 
-    signed = np.nan_to_num(rule.polarity * d, nan=0.0)
-    mask = apply_hysteresis_threshold(signed, rule.k_low * sigma, rule.k * sigma)
+    mask = apply_hysteresis_threshold(signed, low, high)
     labels, n = ndimage.label(mask, structure=np.ones((3, 3, 3), bool))
     sizes = np.bincount(labels.ravel(), minlength=n + 1)[1:] * float(np.prod(voxel_um))
     keep = np.flatnonzero(sizes >= rule.min_volume_um3)
     order = keep[np.argsort(-sizes[keep], kind="stable")]
     relabel = np.zeros(n + 1, np.int32)
     relabel[order + 1] = np.arange(1, len(order) + 1, dtype=np.int32)
-    return relabel[labels], float(sigma)
+    return relabel[labels], float(sigma), float(low)
 
 
 def _regions(labels, voxel_um, resolution_um) -> np.ndarray:
@@ -230,7 +249,7 @@ def measure_objects(
         One per object, largest first: ``object`` (its label), ``x_um``, ``y_um``, ``z_um`` (Δn-weighted
         centroid, µm), ``volume_um3`` (equivalent ellipsoid, NaN when unresolved), ``mean_ri``,
         ``peak_ri``, ``integrated_dn_um3`` (∫Δn dV, µm³), ``dry_mass_pg``, ``voxels`` (of the
-        component), ``noise_dn`` (the background σ).
+        component), ``noise_dn`` (the background σ), ``threshold_dn`` (the low threshold, signed Δn).
     """
     if not refraction_increment_um3_pg > 0:
         raise SsdpcError(f"refraction increment {refraction_increment_um3_pg}: give α > 0 µm³/pg")
@@ -240,7 +259,7 @@ def measure_objects(
         raise SsdpcError(f"Δn of shape {d.shape} does not match its coordinates {tuple(len(c) for c in coords)}")
     voxel = _voxel(*coords)
     dv = float(np.prod(voxel))
-    labels, sigma = segment(d, voxel, rule)
+    labels, sigma, low = segment(d, voxel, rule)
     regions = _regions(labels, voxel, rule.resolution_um)
     psf_var = np.array([rule.resolution_um[0], rule.resolution_um[1], rule.resolution_um[1]]) ** 2 / FWHM_PER_SIGMA**2
     out = []
@@ -273,6 +292,7 @@ def measure_objects(
                 "dry_mass_pg": float(integrated / refraction_increment_um3_pg),
                 "voxels": int(core.size),
                 "noise_dn": sigma,
+                "threshold_dn": rule.polarity * low,
             }
         )
     return out

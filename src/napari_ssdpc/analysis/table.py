@@ -36,6 +36,7 @@ COLUMNS = (
     "dry_mass_pg",
     "voxels",
     "noise_dn",
+    "threshold_dn",
 )
 
 
