@@ -115,3 +115,4 @@ def test_a_phase_file_and_bad_options_are_one_line(tmp_path, store, capsys):
     assert "not RI or Δn" in _one_line(capsys, ["measure", tmp_path / "c_phase.ome.tif"])
     assert "k_low" in _one_line(capsys, ["measure", store[0], "--k", "2", "--k-low", "3"])
     assert "max step" in _one_line(capsys, ["measure", store[0], "--max-step", "0"])
+    assert "fraction" in _one_line(capsys, ["measure", store[0], "--fraction", "0.1", "--fraction-low", "0.3"])

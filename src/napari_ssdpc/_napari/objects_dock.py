@@ -54,6 +54,8 @@ class ObjectsDock(QWidget):
         self.layer = ComboBox(label="result (RI)", choices=_result_layers(napari_viewer))
         self.k = FloatSpinBox(label="seed k (σ)", value=rule.k, min=0.1, max=1000, step=0.5)
         self.k_low = FloatSpinBox(label="extent k_low (σ)", value=rule.k_low, min=0.1, max=1000, step=0.5)
+        self.fraction = FloatSpinBox(label="seed ≥ peak x", value=rule.fraction, min=0, max=0.99, step=0.05)
+        self.fraction_low = FloatSpinBox(label="extent ≥ peak x", value=rule.fraction_low, min=0, max=0.99, step=0.01)
         self.min_volume = FloatSpinBox(label="min volume (µm³)", value=rule.min_volume_um3, min=0, max=1e7)
         self.fwhm_z = FloatSpinBox(label="FWHM z (µm)", value=rule.resolution_um[0], min=0, max=500)
         self.fwhm_xy = FloatSpinBox(label="FWHM xy (µm)", value=rule.resolution_um[1], min=0, max=100)
@@ -70,6 +72,8 @@ class ObjectsDock(QWidget):
                 self.layer,
                 self.k,
                 self.k_low,
+                self.fraction,
+                self.fraction_low,
                 self.min_volume,
                 self.fwhm_z,
                 self.fwhm_xy,
@@ -106,6 +110,8 @@ class ObjectsDock(QWidget):
         return ObjectRule(
             k=self.k.value,
             k_low=self.k_low.value,
+            fraction=self.fraction.value,
+            fraction_low=self.fraction_low.value,
             min_volume_um3=self.min_volume.value,
             resolution_um=(self.fwhm_z.value, self.fwhm_xy.value),
             sign=self.sign.value,
