@@ -1,5 +1,5 @@
 """Results on disk for the measurement tests, written by the product's own sinks: the phantoms'
-Δn blurred to (10, 4) µm FWHM with noise of 1/50 of the cytoplasm's Δn."""
+Δn blurred to the default resolution with noise of 1/50 of the cytoplasm's Δn."""
 
 from types import SimpleNamespace
 
@@ -7,7 +7,7 @@ import numpy as np
 from scipy import ndimage
 
 from napari_ssdpc._version import SOFTWARE
-from napari_ssdpc.analysis.objects import FWHM_PER_SIGMA
+from napari_ssdpc.analysis.objects import DEFAULT_RULE, FWHM_PER_SIGMA
 from napari_ssdpc.pipeline.sinks import OutputGrid, ZarrSink
 from napari_ssdpc.reconstruction.reconstructor import Result
 from napari_ssdpc.settings.config import RunConfig
@@ -16,7 +16,7 @@ from napari_ssdpc.simulation import phantoms
 
 DX = 0.8456
 Z = np.arange(-30.0, 31.0, 1.0)
-Y = X = (np.arange(112) - 55.5) * DX
+Y = X = (np.arange(128) - 63.5) * DX
 ALPHA = 0.2  # µm³/pg, as the result was "reconstructed" with (not the default 0.19)
 N_MEDIUM = 1.33
 
@@ -28,9 +28,10 @@ def run_settings():
 
 
 def result(phantom, seed):
-    """A Result holding the phantom's Δn blurred to (10, 4) µm FWHM, with noise of 1/50 of its Δn."""
+    """A Result holding the phantom's Δn blurred to the default resolution, with noise of 1/50 of its Δn."""
     dn = phantom.volume(Z, Y, X).real
-    s = (10.0 / FWHM_PER_SIGMA, 4.0 / FWHM_PER_SIGMA / DX, 4.0 / FWHM_PER_SIGMA / DX)
+    fz, fxy = DEFAULT_RULE.resolution_um
+    s = (fz / FWHM_PER_SIGMA, fxy / FWHM_PER_SIGMA / DX, fxy / FWHM_PER_SIGMA / DX)
     dn = ndimage.gaussian_filter(dn, s) + np.random.default_rng(seed).normal(0, 0.03 / 50, dn.shape)
     dn = dn.astype(np.float32)
     stored, _ = run_settings()

@@ -27,15 +27,20 @@ def _truth(phantom):
     return sum(weights), 4 / 3 * np.pi * np.prod(parts[0].semi_axes_um), centroid
 
 
+def _blurred(phantom, resolution=RESOLUTION):
+    """The phantom's Δn blurred by a Gaussian of the resolution's (FWHM_z, FWHM_xy)."""
+    fz, fxy = resolution
+    s = (fz / FWHM_PER_SIGMA, fxy / FWHM_PER_SIGMA / DX, fxy / FWHM_PER_SIGMA / DX)
+    return ndimage.gaussian_filter(phantom.volume(Z, Y, X).real, s)
+
+
 def _observed(phantom, seed=0, resolution=RESOLUTION, snr=SNR):
     """The phantom's Δn blurred by a Gaussian of the resolution's FWHM, with noise of Δn/snr (None: none)."""
-    dn = phantom.volume(Z, Y, X).real
-    fz, fxy = resolution
-    blurred = ndimage.gaussian_filter(dn, (fz / FWHM_PER_SIGMA, fxy / FWHM_PER_SIGMA / DX, fxy / FWHM_PER_SIGMA / DX))
+    blurred = _blurred(phantom, resolution)
     if snr is None:
         return blurred, 0.0
     sigma = phantom.parts(phantom.medium())[0].dn.real / snr
-    return blurred + np.random.default_rng(seed).normal(0.0, sigma, dn.shape), sigma
+    return blurred + np.random.default_rng(seed).normal(0.0, sigma, blurred.shape), sigma
 
 
 CASES = {
@@ -60,10 +65,9 @@ def test_dry_mass_volume_and_centroid_of_weak_objects(name):
     assert o["dry_mass_pg"] == pytest.approx(mass / ALPHA, rel=0.1)  # measured 0.99-1.00
     assert o["integrated_dn_um3"] == pytest.approx(mass, rel=0.1)
     assert np.linalg.norm([o["x_um"] - centroid[0], o["y_um"] - centroid[1], o["z_um"] - centroid[2]]) < 0.5
-    if name == "weak bead":  # 6 µm across, 10 µm axial resolution: no volume (docs/measurements.md)
-        assert np.isnan(o["volume_um3"]) and np.isnan(o["mean_ri"])
-    else:
-        assert o["volume_um3"] == pytest.approx(volume, rel=0.1)  # measured 0.94-1.05 (seed 0)
+    if name != "weak bead":  # 6 µm across, at the limit 0.7 x 8 µm: its volume comes and goes with
+        # the noise (NaN in 2 of 8 draws, else 0.87-1.18 of the truth: docs/measurements.md)
+        assert o["volume_um3"] == pytest.approx(volume, rel=0.1)  # measured 0.94-1.02 (seed 0)
         assert o["mean_ri"] == pytest.approx(n_medium + mass / volume, abs=0.1 * mass / volume)
     assert n_medium < o["peak_ri"] < n_medium + max(p.dn.real for p in phantom.parts(n_medium)) * 1.5
 
@@ -103,8 +107,7 @@ def test_lighter_objects_and_two_objects_in_one_volume():
         (phantoms.Sphere((-20.0, 0.0, -10.0), 10.0, 1.51), phantoms.Sphere((20.0, 5.0, 10.0), 8.0, 1.51)),
         medium_index=1.518,
     )
-    dn = ndimage.gaussian_filter(beads.volume(Z, Y, X).real, (4.2, 2.0, 2.0))
-    dn += np.random.default_rng(0).normal(0, 1e-4, dn.shape)
+    dn = _blurred(beads) + np.random.default_rng(0).normal(0, 1e-4, (len(Z), len(Y), len(X)))
     assert measure_objects(dn, Z, Y, X, n_medium=1.518) == []  # denser objects: none
     objects = measure_objects(dn, Z, Y, X, n_medium=1.518, rule=ObjectRule(sign="lighter"))
     assert len(objects) == 2
@@ -116,11 +119,11 @@ def test_lighter_objects_and_two_objects_in_one_volume():
 
 
 def test_an_object_below_the_resolution_has_no_volume_but_its_mass():
-    bead = phantoms.Sphere((0.0, 0.0, 0.0), 4.0, 1.56, medium_index=1.518)  # 4 µm < 0.7 x 10 µm
+    bead = phantoms.Sphere((0.0, 0.0, 0.0), 3.0, 1.56, medium_index=1.518)  # 3 µm < 0.7 x 8 µm
     dn, _ = _observed(bead)
     (o,) = measure_objects(dn, Z, Y, X, n_medium=1.518)
     assert np.isnan(o["volume_um3"]) and np.isnan(o["mean_ri"])
-    assert o["integrated_dn_um3"] == pytest.approx(0.042 * 4 / 3 * np.pi * 2.0**3, rel=0.1)
+    assert o["integrated_dn_um3"] == pytest.approx(0.042 * 4 / 3 * np.pi * 1.5**3, rel=0.1)
 
 
 def test_a_moving_sample_gives_one_track_that_follows_the_truth():

@@ -57,7 +57,7 @@ FWHM_PER_SIGMA = float(2 * np.sqrt(2 * np.log(2)))
 #: below it, removing the blur's variance amplifies the noise of the measured one more than tenfold.
 RESOLVED_FRACTION = 0.7
 #: (FWHM_z, FWHM_xy) µm of the default reconstruction (`tv` at condenser NA 0.3, docs/measurements.md).
-DEFAULT_RESOLUTION_UM = (10.0, 4.0)
+DEFAULT_RESOLUTION_UM = (8.0, 3.0)
 
 
 @dataclass(frozen=True)
@@ -249,7 +249,9 @@ def measure_objects(
         One per object, largest first: ``object`` (its label), ``x_um``, ``y_um``, ``z_um`` (Δn-weighted
         centroid, µm), ``volume_um3`` (equivalent ellipsoid, NaN when unresolved), ``mean_ri``,
         ``peak_ri``, ``integrated_dn_um3`` (∫Δn dV, µm³), ``dry_mass_pg``, ``voxels`` (of the
-        component), ``noise_dn`` (the background σ), ``threshold_dn`` (the low threshold, signed Δn).
+        component), ``at_edge`` (1: the region reaches the volume's edge, where the object's tails are
+        cut off and its volume and mass read low), ``noise_dn`` (the background σ), ``threshold_dn``
+        (the low threshold, signed Δn).
     """
     if not refraction_increment_um3_pg > 0:
         raise SsdpcError(f"refraction increment {refraction_increment_um3_pg}: give α > 0 µm³/pg")
@@ -291,6 +293,7 @@ def measure_objects(
                 "integrated_dn_um3": float(integrated),
                 "dry_mass_pg": float(integrated / refraction_increment_um3_pg),
                 "voxels": int(core.size),
+                "at_edge": int(any(s.start == 0 or s.stop == n for s, n in zip(sl, d.shape))),
                 "noise_dn": sigma,
                 "threshold_dn": rule.polarity * low,
             }

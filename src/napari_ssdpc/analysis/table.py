@@ -35,6 +35,7 @@ COLUMNS = (
     "integrated_dn_um3",
     "dry_mass_pg",
     "voxels",
+    "at_edge",
     "noise_dn",
     "threshold_dn",
 )
@@ -188,7 +189,7 @@ def read_csv(path) -> list[dict]:
     -------
     list of dict
     """
-    ints = {"t", "track", "object", "voxels"}
+    ints = {"t", "track", "object", "voxels", "at_edge"}
     with open(path, encoding="utf-8", newline="") as f:
         return [{k: int(v) if k in ints else float(v) for k, v in r.items()} for r in csv.DictReader(f)]
 
