@@ -56,8 +56,9 @@ FWHM_PER_SIGMA = float(2 * np.sqrt(2 * np.log(2)))
 #: An object is resolved along an axis when its diameter is at least this fraction of the FWHM there:
 #: below it, removing the blur's variance amplifies the noise of the measured one more than tenfold.
 RESOLVED_FRACTION = 0.7
-#: (FWHM_z, FWHM_xy) µm of the default reconstruction (`tv` at condenser NA 0.3, docs/measurements.md).
-DEFAULT_RESOLUTION_UM = (8.0, 3.0)
+#: (FWHM_z, FWHM_xy) µm: the Gaussian blur that best matches `tv`'s reconstruction of a weak 6 µm bead
+#: at condenser NA 0.3 (least squares; `tv` keeps lateral edges sharp), docs/measurements.md.
+DEFAULT_RESOLUTION_UM = (9.0, 1.0)
 
 
 @dataclass(frozen=True)
