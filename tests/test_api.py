@@ -7,7 +7,7 @@ import textwrap
 import pytest
 
 #: Packages that load their public names lazily (``__init__.pyi``).
-LAZY = [f"napari_ssdpc{p}" for p in ("", ".calibration", ".io", ".reconstruction", ".simulation")]
+LAZY = [f"napari_ssdpc{p}" for p in ("", ".analysis", ".calibration", ".io", ".reconstruction", ".simulation")]
 #: Modules that a light import must not load.
 HEAVY = ("numpy", "scipy", "pydantic", "tifffile", "zarr", "dask", "matplotlib", "napari")
 

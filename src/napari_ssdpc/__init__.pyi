@@ -1,4 +1,5 @@
 from ._version import SOFTWARE, __version__
+from .analysis.table import measure_result
 from .calibration import Calibration, Views, calibrate, extract_views, insert_views, overlay_png
 from .errors import Cancelled, SsdpcError, SsdpcWarning
 from .io import read_frame, write_ome_tiff
@@ -26,6 +27,7 @@ __all__ = [
     "extract_views",
     "flat_frame",
     "insert_views",
+    "measure_result",
     "moving_sample",
     "overlay_png",
     "pmma_bead",
