@@ -58,7 +58,8 @@ def write_moving_store(out):
     series = phantoms.moving_sample(20)[:6]
     stored, optics = run_settings()
     sink = ZarrSink(out, meta={"software": SOFTWARE, "optics": optics})
-    sink.open(SimpleNamespace(result_key="k"), OutputGrid(Z, Y, X, stored), source(6))
+    job = SimpleNamespace(result_key="k", config=SimpleNamespace(outputs=SimpleNamespace(store_digits=None)))
+    sink.open(job, OutputGrid(Z, Y, X, stored), source(6))
     for t, p in enumerate(series[:5]):
         sink.write(t, result(p, t))
     sink.close()
