@@ -120,3 +120,28 @@ def test_a_phase_file_and_bad_options_are_one_line(tmp_path, store, capsys):
     assert "k_low" in _one_line(capsys, ["measure", store[0], "--k", "2", "--k-low", "3"])
     assert "max step" in _one_line(capsys, ["measure", store[0], "--max-step", "0"])
     assert "fraction" in _one_line(capsys, ["measure", store[0], "--fraction", "0.1", "--fraction-low", "0.3"])
+
+
+def test_what_ssdpc_reconstruct_writes_is_measured(synthetic_series, tmp_path, capsys):
+    """The OME-TIFF and the store of `ssdpc reconstruct` itself (frames of the synthetic series)."""
+    _, cal, flat, frames, _ = synthetic_series
+    tifffile.imwrite(tmp_path / "raw.tif", frames[:2])
+    tifffile.imwrite(tmp_path / "one.tif", frames[0])
+    tifffile.imwrite(tmp_path / "flat.tif", flat)
+    cal.to_json(tmp_path / "cal.json")
+    common = ["--calibration", tmp_path / "cal.json", "--flat", tmp_path / "flat.tif", "--z", "-4", "4", "--dz", "4"]
+    grids = []
+    for raw, out in (("one.tif", "one.ome.tif"), ("raw.tif", "series.zarr")):
+        argv = ["reconstruct", tmp_path / raw, *common, "--method", "wotf", "-o", tmp_path / out]
+        assert main([str(a) for a in argv]) == 0, capsys.readouterr().err
+        stored = open_result(tmp_path / out)
+        assert stored.n_medium == cal.optics.medium_index and len(stored.z_um) == 3
+        np.testing.assert_allclose(np.diff(stored.z_um), 4.0)
+        grids.append((stored.y_um, stored.x_um))
+        assert main(["measure", str(tmp_path / out)]) == 0, capsys.readouterr().err
+        table = csv_path(tmp_path / out)
+        assert table.read_text().splitlines()[0] == ",".join(COLUMNS)
+        assert {r["t"] for r in read_csv(table)} <= ({0} if out.endswith(".tif") else {0, 1})
+    # the OME-TIFF's lateral grid (centred on the axis) is the store's (its NGFF translation)
+    for a, b in zip(*grids):
+        np.testing.assert_allclose(a, b, atol=1e-4)
