@@ -54,7 +54,8 @@ REFRACTION_INCREMENT_UM3_PG: float = float(
 #: FWHM of a Gaussian over its standard deviation, 2√(2 ln 2).
 FWHM_PER_SIGMA = float(2 * np.sqrt(2 * np.log(2)))
 #: An object is resolved along an axis when its diameter is at least this fraction of the FWHM there:
-#: below it, removing the blur's variance amplifies the noise of the measured one more than tenfold.
+#: below it the blur's variance is over 7 times the object's own (a uniform ellipsoid: (0.35 FWHM)²/5
+#: against (FWHM/2.355)²), and removing it multiplies the relative error of the measured one by over 8.
 RESOLVED_FRACTION = 0.7
 #: (FWHM_z, FWHM_xy) µm: the Gaussian blur that best matches `tv`'s reconstruction of a weak 6 µm bead
 #: at condenser NA 0.3 (least squares; `tv` keeps lateral edges sharp), docs/measurements.md.
