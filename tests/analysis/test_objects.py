@@ -144,6 +144,23 @@ def test_a_moving_sample_gives_one_track_that_follows_the_truth():
     assert np.ptp(masses) < 0.05 * np.mean(masses)  # the same object all along
 
 
+def test_a_resting_bead_beside_a_moving_sample_gives_two_tracks():
+    bead = phantoms.Sphere((25.0, 20.0, 0.0), 10.0, 1.36, medium_index=1.33)
+    series = phantoms.moving_sample(20)[:6]
+    rng = np.random.default_rng(0)
+    frames = [
+        (t, _blurred(bead) + _blurred(p) + rng.normal(0, 6e-4, (len(Z), len(Y), len(X)))) for t, p in enumerate(series)
+    ]
+    rows = measure_series(frames, Z, Y, X, n_medium=1.33)
+    tracks = {k: [r for r in rows if r["track"] == k] for k in {r["track"] for r in rows}}
+    assert len(tracks) == 2 and all(len(v) == 6 for v in tracks.values())
+    still, moving = sorted(tracks.values(), key=lambda v: abs(v[-1]["x_um"] - v[0]["x_um"]))
+    for r in still:
+        assert np.linalg.norm([r["x_um"] - 25, r["y_um"] - 20, r["z_um"]]) < 0.5
+    for r, p in zip(moving, series):
+        assert np.linalg.norm([r["x_um"], r["y_um"], r["z_um"]] - _truth(p)[2]) < 1.0
+
+
 def test_tracks_link_nearest_objects_and_split_beyond_the_step():
     a = {"x_um": 0.0, "y_um": 0.0, "z_um": 0.0}
     b = {"x_um": 30.0, "y_um": 0.0, "z_um": 0.0}
