@@ -131,8 +131,8 @@ def test_what_ssdpc_reconstruct_writes_is_measured(synthetic_series, tmp_path, c
     cal.to_json(tmp_path / "cal.json")
     common = ["--calibration", tmp_path / "cal.json", "--flat", tmp_path / "flat.tif", "--z", "-4", "4", "--dz", "4"]
     grids = []
-    for raw, out in (("one.tif", "one.ome.tif"), ("raw.tif", "series.zarr")):
-        argv = ["reconstruct", tmp_path / raw, *common, "--method", "wotf", "-o", tmp_path / out]
+    for raw, out, save in (("one.tif", "one.ome.tif", []), ("raw.tif", "series.zarr", ["--save", "delta_n"])):
+        argv = ["reconstruct", tmp_path / raw, *common, "--method", "wotf", *save, "-o", tmp_path / out]
         assert main([str(a) for a in argv]) == 0, capsys.readouterr().err
         stored = open_result(tmp_path / out)
         assert stored.n_medium == cal.optics.medium_index and len(stored.z_um) == 3
@@ -142,6 +142,9 @@ def test_what_ssdpc_reconstruct_writes_is_measured(synthetic_series, tmp_path, c
         table = csv_path(tmp_path / out)
         assert table.read_text().splitlines()[0] == ",".join(COLUMNS)
         assert {r["t"] for r in read_csv(table)} <= ({0} if out.endswith(".tif") else {0, 1})
+    # a store with Δn saved is read from it: the same as its RI less the medium
+    ri = zarr.open_group(str(tmp_path / "series.zarr"), mode="r")["ri"]["0"][1]
+    np.testing.assert_allclose(stored.delta_n(1), ri - np.float32(stored.n_medium), atol=1e-6)
     # the OME-TIFF's lateral grid (centred on the axis) is the store's (its NGFF translation)
     for a, b in zip(*grids):
         np.testing.assert_allclose(a, b, atol=1e-4)
