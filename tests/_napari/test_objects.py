@@ -73,3 +73,17 @@ def test_the_dock_measures_shows_and_saves(make_napari_viewer, qtbot, store, tmp
     dock.path.value = tmp_path / "shown_objects.csv"
     assert dock.save_table() == tmp_path / "shown_objects.csv"
     assert len(read_csv(tmp_path / "shown_objects.csv")) == 5
+
+
+def test_the_dock_opens_from_the_plugins_menu(make_napari_viewer, monkeypatch):
+    from napari_ssdpc._napari import notify
+    from napari_ssdpc._napari.objects_dock import ObjectsDock
+
+    shown = []
+    monkeypatch.setattr(notify, "error", lambda m: shown.append(str(m)))
+    viewer = make_napari_viewer()
+    _, widget = viewer.window.add_plugin_dock_widget("napari-ssdpc", "6. Objects over time")
+    assert isinstance(widget, ObjectsDock) and widget.layer.value is None
+    assert widget.measure() is None  # no result layer: refused with a message, nothing runs
+    assert widget.save_table() is None
+    assert shown == ["open or reconstruct a result first: no RI layer to measure", "measure the objects first"]
