@@ -47,7 +47,7 @@ def truth(phantom):
 
 def source(n):
     """A finished frame source of ``n`` frames, as the sinks see one."""
-    ident = {"path": "raw.tif", "size": 1, "mtime_ns": 1, "frames": n, "sha256": "0" * 64}
+    ident = {"path": "array", "size": None, "mtime_ns": None, "frames": n, "sha256": "0" * 64}
     return SimpleNamespace(
         available=lambda: n, finished=lambda: True, identity=lambda: ident, frame_shape=(8, 8), name="raw.tif"
     )

@@ -148,3 +148,59 @@ def test_what_ssdpc_reconstruct_writes_is_measured(synthetic_series, tmp_path, c
     # the OME-TIFF's lateral grid (centred on the axis) is the store's (its NGFF translation)
     for a, b in zip(*grids):
         np.testing.assert_allclose(a, b, atol=1e-4)
+
+
+def _damage(store, how):
+    root = zarr.open_group(str(store), mode="r+")
+    g = root["ri"]
+    attrs = dict(g.attrs)
+    ms = attrs["multiscales"][0]
+    scale = ms["datasets"][0]["coordinateTransformations"][0]
+    if how == "chunk":  # a frame's chunk overwritten with junk
+        (next(p for p in (store / "ri" / "0").rglob("*") if p.is_file() and not p.name.startswith("."))).write_bytes(
+            b"junk"
+        )
+        return
+    damage = {
+        "scale-nan": lambda: scale.update(scale=[1.0, float("nan"), 1.0, 1.0]),
+        "scale-zero": lambda: scale.update(scale=[1.0, 0.0, 1.0, 1.0]),
+        "scale-text": lambda: scale.update(scale="abc"),
+        "no-axes": lambda: ms.pop("axes"),
+        "dataset-missing": lambda: ms["datasets"][0].update(path="nope"),
+        "transforms-missing": lambda: ms["datasets"][0].pop("coordinateTransformations"),
+        "no-medium": lambda: attrs.update(napari_ssdpc={**attrs["napari_ssdpc"], "optics": {}}),
+        "medium-text": lambda: attrs.update(napari_ssdpc={**attrs["napari_ssdpc"], "optics": {"medium_index": "x"}}),
+        "alpha-negative": lambda: attrs.update(
+            napari_ssdpc={**attrs["napari_ssdpc"], "settings": {"refraction_increment_um3_pg": -1}}
+        ),
+    }
+    damage[how]()
+    attrs["multiscales"] = [ms]
+    g.attrs.clear()
+    g.attrs.update(attrs)
+
+
+@pytest.mark.parametrize(
+    "how",
+    [
+        "scale-nan",
+        "scale-zero",
+        "scale-text",
+        "no-axes",
+        "dataset-missing",
+        "transforms-missing",
+        "no-medium",
+        "medium-text",
+        "alpha-negative",
+        "chunk",
+    ],
+)
+def test_a_damaged_store_is_one_line_and_writes_nothing(store, tmp_path, capsys, how):
+    import shutil
+
+    damaged = tmp_path / "d.zarr"
+    shutil.copytree(store[0], damaged)
+    _damage(damaged, how)
+    line = _one_line(capsys, ["measure", damaged])
+    assert str(damaged) in line or "refraction increment" in line
+    assert not csv_path(damaged).exists()

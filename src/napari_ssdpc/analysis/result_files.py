@@ -65,7 +65,12 @@ class StoredResult:
         ndarray, float32, (z, y, x)
         """
         data = self._data
-        vol = np.asarray(data[t] if getattr(data, "ndim", 0) == 4 else data, dtype=np.float32)  # type: ignore[index]
+        try:
+            vol = np.asarray(data[t] if getattr(data, "ndim", 0) == 4 else data, dtype=np.float32)  # type: ignore[index]
+        except (OSError, ValueError, KeyError, TypeError, RuntimeError) as e:
+            raise SsdpcError(
+                f"{self.path}: frame {t} cannot be read ({type(e).__name__}); the file is damaged"
+            ) from None
         vol = vol.reshape(len(self.z_um), len(self.y_um), len(self.x_um))
         return vol - np.float32(self.n_medium) if self._is_ri else vol
 
@@ -95,6 +100,25 @@ def _ours(desc) -> bool:
     return isinstance(desc, dict) and str(desc.get("software", "")).startswith("napari-ssdpc")
 
 
+def _damaged(opener):
+    """``opener(path)`` with damaged metadata (missing keys, text for numbers) as one line."""
+
+    def read(path: Path) -> StoredResult:
+        try:
+            stored = opener(path)
+        except (KeyError, IndexError, TypeError, ValueError, AttributeError) as e:
+            raise SsdpcError(f"{path}: its metadata is damaged ({type(e).__name__}: {e}); {_HOW}") from None
+        for name, c in (("z", stored.z_um), ("y", stored.y_um), ("x", stored.x_um)):
+            if not np.all(np.isfinite(c)) or (len(c) > 1 and not np.all(np.diff(c) > 0)):
+                raise SsdpcError(f"{path}: its {name} coordinates are not finite and increasing; {_HOW}")
+        if not (np.isfinite(stored.n_medium) and 1.0 <= stored.n_medium <= 2.5):
+            raise SsdpcError(f"{path}: the medium's index {stored.n_medium} is not one of a medium; {_HOW}")
+        return stored
+
+    return read
+
+
+@_damaged
 def _open_zarr(path: Path) -> StoredResult:
     import zarr
 
@@ -133,6 +157,7 @@ def _open_zarr(path: Path) -> StoredResult:
     return StoredResult(path, z, y, x, _medium(desc, path), _alpha(desc), frames, data, name == "ri")
 
 
+@_damaged
 def _open_tiff(path: Path) -> StoredResult:
     import tifffile
 
