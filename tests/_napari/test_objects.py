@@ -82,7 +82,7 @@ def test_the_dock_opens_from_the_plugins_menu(make_napari_viewer, monkeypatch):
     shown = []
     monkeypatch.setattr(notify, "error", lambda m: shown.append(str(m)))
     viewer = make_napari_viewer()
-    _, widget = viewer.window.add_plugin_dock_widget("napari-ssdpc", "6. Objects over time")
+    _, widget = viewer.window.add_plugin_dock_widget("napari-ssdpc", "Objects over time")
     assert isinstance(widget, ObjectsDock) and widget.layer.value is None
     assert widget.measure() is None  # no result layer: refused with a message, nothing runs
     assert widget.save_table() is None
