@@ -144,7 +144,7 @@ class MultisliceSettings(SettingsModel):
     runtime: ClassVar[frozenset[str]] = frozenset(
         {"iterations", "source_spacing_na", "source_subsamples", "substeps", "refine", "roi_margin_um", "z_margin_um"}
         | {"roi_um"}
-        | {"tv_weight", "stop_residual_over_noise"}
+        | {"tv_weight", "stop_residual_over_noise", "unknowns"}
     )
 
     iterations: int = bounded(60, 1, 500, "most gradient iterations of the refinement")
@@ -166,6 +166,9 @@ class MultisliceSettings(SettingsModel):
         None, description="region the model covers, [x_min, x_max, y_min, y_max] µm; empty: around the objects"
     )
     tv_weight: float = bounded(0.0, 0.0, 1e3, "total-variation weight, relative to the views' noise; 0: none")
+    unknowns: Literal["views", "model"] = Field(
+        "views", description="grid of the fitted Δn: the views' pixels, or the model's k x k finer samples"
+    )
     stop_residual_over_noise: float = bounded(
         4.0, 0.0, 1e6, "stop when the mean squared residual falls to this many times the noise variance"
     )

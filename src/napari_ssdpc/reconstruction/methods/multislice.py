@@ -211,18 +211,21 @@ class MultisliceMethod(PhaseMethod):
             z, ny, nx = g.shape
             return g.reshape(z, ny // k, k, nx // k, k).sum(axis=(2, 4))
 
+        # the unknowns' grid: the views' (each pixel k x k in the model) or the model's own
+        grid = {"up": fine, "down": coarse_sum, "inside": inside, "voxel": voxel}
+
         def project(x):
-            return np.clip(x, lo, hi) * inside
+            return np.clip(x, lo, hi) * grid["inside"]
 
         def objective(x, with_grad=True):
             if with_grad:
-                f, g = model.misfit(fine(x), measured, weight)
-                g = coarse_sum(np.asarray(g, np.float64))
+                f, g = model.misfit(grid["up"](x), measured, weight)
+                g = grid["down"](np.asarray(g, np.float64))
             else:
-                r = (np.asarray(model.views(fine(x)), np.float64) - measured) * np.sqrt(weight)
+                r = (np.asarray(model.views(grid["up"](x)), np.float64) - measured) * np.sqrt(weight)
                 f, g = 0.5 * float(np.sum(r * r)), None
             if mu > 0:
-                t, gt = _tv_smooth(x, voxel, 1e-4)
+                t, gt = _tv_smooth(x, grid["voxel"], 1e-4)
                 f += mu * t
                 g = None if g is None else g + mu * gt
             return f, g
@@ -232,7 +235,7 @@ class MultisliceMethod(PhaseMethod):
         enough = 0.5 * n_data * noise**2 * ms.stop_residual_over_noise if noise > 0 else 0.0
 
         def residual(x_model, x):
-            return (np.asarray(x_model.views(fine(x)), np.float64) - measured) * np.sqrt(weight)
+            return (np.asarray(x_model.views(grid["up"](x)), np.float64) - measured) * np.sqrt(weight)
 
         def report(x_model, res, history, converged):
             return {
@@ -259,6 +262,10 @@ class MultisliceMethod(PhaseMethod):
             return Solution(start.phase, kept, {**start.history, "multislice": {"objective": [f0]}}, state=start.state)
         model = make(planes)
         x = project(np.where(window[planes], dn[planes, rows, cols], 0.0))  # the objects, not their tails
+        if ms.unknowns == "model":  # sub-pixel edges: each view pixel's k x k model samples are free
+            same = lambda a: a
+            grid.update(up=same, down=same, inside=fine(inside), voxel=(dz, px / k, px / k))
+            x = fine(x)
         f, g = objective(x)
         history = {"objective": [f], "relative_change": []}
         step = 0.1 * max(float(np.abs(x).max()), 1e-3) / max(float(np.abs(g).max()), 1e-30)
@@ -300,7 +307,8 @@ class MultisliceMethod(PhaseMethod):
                 converged = True
                 break
         dn[:, rows, cols] = 0.0  # the model holds the objects: the first-order tails are gone
-        dn[planes, rows, cols] = x
+        out_x = coarse_sum(x) / k**2 if ms.unknowns == "model" else x  # back on the views' grid
+        dn[planes, rows, cols] = out_x
         phase = (dn / to_dn).astype(np.float32)
         out = report(model, residual(model, x), history, converged)
         return Solution(phase, out, {**start.history, "multislice": history}, state=start.state)
