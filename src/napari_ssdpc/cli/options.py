@@ -34,6 +34,7 @@ FLAGS = {
     "tv-lambda": "tv.lambda_scale",
     "tv-iterations": "tv.iterations",
     "tv-warm-iterations": "tv.warm_iterations",
+    "temporal-weight": "tv.temporal_weight",
     "warm-start": "warm_start",
     "refraction-increment": "refraction_increment_um3_pg",
     "device": "device",

@@ -49,7 +49,7 @@ from napari_ssdpc.reconstruction.forward import ViewModel, apply
 from napari_ssdpc.reconstruction.tv_report import TvReport
 from napari_ssdpc.settings.reconstruction import SIGNS
 
-__all__ = ["LAMBDA_PER_NOISE", "TvInversion", "TvState", "bounds"]
+__all__ = ["LAMBDA_PER_NOISE", "TvInversion", "TvState", "bounds", "prox_two_kinks"]
 
 #: ℓ of the sparsity term μ‖φ‖₁ with μ = λ/ℓ, in units of the axial resolution R_z: without it a
 #: constant offset inside the field stop (the unmeasured slice mean) costs only its boundary.
@@ -231,6 +231,7 @@ class TvInversion:
         lam: float | None = None,
         iterations: int = 60,
         tol: float = 2e-3,
+        temporal_weight: float = 0.0,
         progress=None,
         should_stop=None,
         quiet: bool = False,
@@ -255,6 +256,10 @@ class TvInversion:
             Most ADMM iterations.
         tol : float
             Stop when the relative change of φ falls below this.
+        temporal_weight : float
+            γ/μ of the temporal prior γ‖φ − φ_prev‖₁, relative to the sparsity weight μ; used only
+            with a ``warm`` TvState (φ_prev: its constraint split z₂, the previous frame's feasible
+            phase). 0: none.
         progress : callable, optional
             ``progress(done, total, 'TV')`` per iteration.
         should_stop : callable, optional
@@ -281,6 +286,12 @@ class TvInversion:
         rhs0 = self.model.put(apply(self.ah_h, band), self.nz)
         scale = sigma * math.sqrt(self.data_scale) if math.isfinite(sigma) and sigma > 0 else 1e-3
         report = TvReport(noise=sigma, lam_auto=lam is None, sign=sign, warm=isinstance(warm, TvState))
+        if temporal_weight < 0:
+            raise SsdpcError(f"temporal_weight {temporal_weight:g}: use a weight >= 0 (0: no temporal prior)")
+        prior = None
+        if isinstance(warm, TvState) and temporal_weight > 0:
+            prior = self.xp.array(warm.z2, copy=True)  # the previous frame's feasible phase
+            report.temporal_weight = float(temporal_weight)
         lam_abs = LAMBDA_PER_NOISE * scale * (1.0 if lam is None else float(lam))
         report.lam = lam_abs
         cell = float(np.prod(self.voxel))
@@ -316,9 +327,21 @@ class TvInversion:
             phi = new
             self._grad(phi, out=g)
             tv = self._update_gradients(g, z1, u1, thresh)
-            penalty = lam_abs * (tv + float(abs(phi).sum()) / self.sparsity_um)
+            l1_sum = float(abs(phi).sum())
+            if prior is not None:
+                l1_sum += temporal_weight * float(abs(phi - prior).sum())
+            penalty = lam_abs * (tv + l1_sum / self.sparsity_um)
             report.objective.append(0.5 * self._data(fwd, band) + penalty * cell)
-            self._update_constraints(phi, z2, u2, l1, bounds(sign, phi_max), scratch=g[0])
+            self._update_constraints(
+                phi,
+                z2,
+                u2,
+                l1,
+                bounds(sign, phi_max),
+                scratch=g[0],
+                prior=prior,
+                gamma=l1 * np.float32(temporal_weight),
+            )
             report.relative_change.append(change)
             report.iterations = it + 1
             if progress is not None:
@@ -390,9 +413,10 @@ class TvInversion:
         volume at once on a GPU."""
         return part(slice(None)) if self.bk.is_gpu else sum(in_threads(part, self.nz))
 
-    def _update_constraints(self, phi, z2, u2, l1, bounds, scratch) -> None:
+    def _update_constraints(self, phi, z2, u2, l1, bounds, scratch, prior=None, gamma=0.0) -> None:
         """Over-relaxed ADMM step of the constraint split, in place: v = αφ + (1 − α)z₂ + u₂,
-        z₂ = P_C(shrink(v, μ)) (the sparsity prox, then the sign, bound and field stop) and
+        z₂ = P_C(prox(v)) (the sparsity prox, with a ``prior`` the prox of the sparsity and the
+        temporal prior :func:`prox_two_kinks`, then the sign, bound and field stop) and
         u₂ = v − z₂. ``scratch`` (the shape of φ) is overwritten."""
         xp, mask = self.xp, self._mask
 
@@ -402,8 +426,11 @@ class TvInversion:
             u += z
             xp.multiply(phi[sl], np.float32(RELAX), out=s)
             u += s  # u holds v
-            xp.clip(u, -l1, l1, out=z)
-            xp.subtract(u, z, out=z)  # shrink(v, μ)
+            if prior is None:
+                xp.clip(u, -l1, l1, out=z)
+                xp.subtract(u, z, out=z)  # shrink(v, μ)
+            else:
+                z[...] = prox_two_kinks(u, prior[sl], l1, gamma, xp)
             xp.clip(z, *bounds, out=z)
             z *= mask
             u -= z
@@ -431,6 +458,39 @@ class TvInversion:
             return tv
 
         return self._parts(part)
+
+
+def prox_two_kinks(v, p, mu, gamma, xp=np):
+    """argmin_z μ|z| + γ|z − p| + ½(z − v)², elementwise: the sparsity and the temporal prior.
+
+    The sum of two absolute values has its kinks at lo = min(0, p) and hi = max(0, p), with the
+    weights w_lo and w_hi of the terms that sit there; the minimiser is v + w_lo + w_hi where that
+    lies below lo, v − w_lo − w_hi where that lies above hi, and else v − w_lo + w_hi clipped to
+    [lo, hi]. With p = 0 it is the shrinkage by μ + γ. A box constraint (the sign and the bound)
+    is then a clip: the function is convex in one variable.
+
+    Parameters
+    ----------
+    v, p : array, float32, same shape
+        The point and the prior (the previous frame's phase), rad.
+    mu, gamma : float
+        The weights of |z| and |z − p| (≥ 0), in the units of v.
+    xp : module
+        NumPy or CuPy.
+
+    Returns
+    -------
+    array, float32, shaped like v
+    """
+    mu, gamma = np.float32(mu), np.float32(gamma)
+    lo, hi = xp.minimum(p, 0), xp.maximum(p, 0)
+    # p ≥ 0: |z| kinks at lo = 0 (w_lo = μ), |z − p| at hi (w_hi = γ); p < 0: the other way round
+    inner = xp.where(p >= 0, v - mu + gamma, v - gamma + mu)
+    z = xp.clip(inner, lo, hi)
+    total = mu + gamma
+    below, above = v + total, v - total
+    z = xp.where(below < lo, below, z)
+    return xp.where(above > hi, above, z).astype(np.float32, copy=False)
 
 
 def bounds(sign, phi_max) -> tuple[float, float]:

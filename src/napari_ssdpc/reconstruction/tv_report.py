@@ -36,6 +36,8 @@ class TvReport:
         With sign 'auto': the objective each sign's probe reached.
     warm : bool
         The solve started where the previous frame's ended.
+    temporal_weight : float
+        Weight of the temporal prior used, relative to the sparsity's (0: none, as on a first frame).
     state : TvState or None
         Where the solve ended (the start of the next frame); not metadata.
     """
@@ -51,6 +53,7 @@ class TvReport:
     residual_over_noise: float = float("nan")
     sign_objectives: dict = field(default_factory=dict)
     warm: bool = False
+    temporal_weight: float = 0.0
     state: Any = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict:
@@ -65,4 +68,5 @@ class TvReport:
             "tv_sign": self.sign,
             "tv_residual_over_noise": self.residual_over_noise,
             "tv_warm_start": self.warm,
+            "tv_temporal_weight": self.temporal_weight,
         }

@@ -108,7 +108,9 @@ class TvSettings(SettingsModel):
     """The 'tv' method: the same operators with total variation and the physical constraints."""
 
     #: Keys read at every solve: changing them keeps the built operators.
-    runtime: ClassVar[frozenset[str]] = frozenset({"sign", "dn_max", "lambda_scale", "iterations", "warm_iterations"})
+    runtime: ClassVar[frozenset[str]] = frozenset(
+        {"sign", "dn_max", "lambda_scale", "iterations", "warm_iterations", "temporal_weight"}
+    )
 
     alpha: float = _alpha(0.1, "the strongest frequency's Σ_k,z |A|² / K: the Tikhonov start")
     sign: Sign = Field("auto", description="sign of Δn against the medium; auto: the one the data support")
@@ -122,6 +124,13 @@ class TvSettings(SettingsModel):
         1,
         2000,
         "most ADMM iterations of a frame that starts where the previous frame's solve ended (at most iterations)",
+    )
+    temporal_weight: float = bounded(
+        0.0,
+        0.0,
+        100.0,
+        "weight of the temporal prior |Δn − previous frame's| of a warm-started series frame, "
+        "relative to the sparsity's; 0: none",
     )
 
 

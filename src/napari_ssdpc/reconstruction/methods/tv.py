@@ -35,7 +35,9 @@ class TvMethod(PhaseMethod):
     Without a warm start a frame starts from its Tikhonov solution and runs up to ``iterations``;
     a frame of a series warm-started from the previous frame's solution starts from where that
     solve ended (all ADMM variables and the sign 'auto' chose) and runs up to
-    ``warm_iterations``, stopping on the same relative change."""
+    ``warm_iterations``, stopping on the same relative change. Such a frame also takes the
+    temporal prior ``temporal_weight`` x μ ‖φ − φ_prev‖₁ against the previous frame's phase
+    (docs/method.md); the first frame of a series has none."""
 
     name = "tv"
 
@@ -56,8 +58,10 @@ class TvMethod(PhaseMethod):
         v, t = self.setup.views, self.setup.settings.tv
         contrast = contrast_of(views, v.view_mask)
         state = None if warm is None else warm.state
+        temporal = 0.0
         if isinstance(state, TvState):
             start, iterations = state, min(t.warm_iterations, t.iterations)  # never more than a cold frame
+            temporal = t.temporal_weight
         else:
             start = warm.phase if warm is not None else self.wotf.phase(contrast) * v.mask
             iterations = t.iterations
@@ -68,6 +72,7 @@ class TvMethod(PhaseMethod):
             phi_max=2 * math.pi * self.setup.dz_um * t.dn_max / self.setup.optics.wavelength_um,  # Δn = λφ/(2π dz)
             lam=t.lambda_scale,
             iterations=iterations,
+            temporal_weight=temporal,
             progress=None if progress is None else (lambda i, n, label="TV", *_: progress(i, n, label)),
             should_stop=should_stop,
         )
