@@ -163,7 +163,9 @@ def test_the_temporal_prior_lowers_the_frame_to_frame_noise_of_a_resting_object(
 
 
 def test_the_temporal_prior_does_not_hold_a_moving_object_back(setup):
-    """A disk moving 1 px a frame: the prior's x centroid follows the truth within a pixel."""
+    """A disk moving 1 px a frame: the x centroid follows the truth within a quarter pixel with
+    the prior as without (measured: 0.01 px without, 0.05 px at weight 2; weight 32 lags by
+    0.6-1 px)."""
     tv, mask, z = setup
     centres = 28.0 + np.arange(6.0)
     frames = _series(tv, mask, z, centres, seed=4)
@@ -172,7 +174,7 @@ def test_the_temporal_prior_does_not_hold_a_moving_object_back(setup):
         phi = _solve_series(tv, frames, weight)
         column = np.clip(phi, 0, None).sum(axis=(1, 2))  # (T, nx)
         cx = (column * xx).sum(axis=1) / column.sum(axis=1)
-        assert np.all(abs(cx - centres) < 1.0), (weight, cx - centres)
+        assert np.all(abs(cx - centres) < 0.25), (weight, cx - centres)
 
 
 def test_the_temporal_weight_is_a_runtime_setting_with_a_flag():

@@ -401,3 +401,19 @@ def test_pmma_bead_run_time_paper_optics():
     c = sim.grid.lattice_px(0, 0)
     ratio = sim.intensity[int(c[1]), int(c[0])] / flat[int(c[1]), int(c[0])]
     assert 0.0 < ratio < 2.0 and sim.frame.max() < 4095
+
+
+def test_the_temporal_prior_phantoms_move_and_change_as_documented():
+    from napari_ssdpc.simulation import phantoms as ph
+
+    glide = ph.gliding_cell_and_bead(10)
+    cells = np.array([p.items[0].center_um for p in glide])
+    assert np.allclose(np.diff(cells, axis=0), (2.0, 4 / 3, 4 / 3))  # µm a frame in x, y, z
+    assert all(p.items[2] == glide[0].items[2] for p in glide)  # the bead rests
+    assert glide[0].items[2].dn == pytest.approx(0.01)
+    shape = ph.changing_cell(8)
+    axes = np.array([c.semi_axes_um for c in shape])
+    assert np.allclose(axes[2], (10.0, 3.75, 3.5)) and np.allclose(axes[0, :2], (8.0, 5.0))
+    assert len({c.center_um for c in shape}) == 1
+    with pytest.raises(SsdpcError, match="amplitude"):
+        ph.changing_cell(4, amplitude=0.8)
