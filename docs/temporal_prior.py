@@ -15,8 +15,8 @@ the per-frame solution). Per weight, over the warm frames 1..T−1:
 - background: the std of Δn over the voxels inside the field stop farther than 10 µm from the
   truth's support in that frame, averaged over the frames (and its std over the frames), and the
   flicker: the std over the frames of each voxel that is background in every frame, averaged;
-  the same beyond the resolution ("beyond FWHM_z": farther than 10 µm laterally or 20.7 µm
-  along z, so that the objects' own axial elongation does not count as noise);
+  the same beyond the resolution ("beyond FWHM_z": outside the support grown by 10 µm
+  laterally and 20.7 µm along z, so that the objects' own axial elongation does not count as noise);
 - the resting object (the bead): the correlation of Δn with the truth blurred to the method's
   resolution, in a box of ±10 µm (x, y) and ±20 µm (z) around it;
 - the moving object (the cell): the error of its Δn-weighted centroid (in a box around the true
@@ -83,7 +83,7 @@ def truths(phantoms, rec, moving, resting):
         truth = val.truth_volume(p, grid, MEDIUM)
         blurred = val.truth_volume(p, grid, MEDIUM, blur_um=RESOLUTION_UM)
         far = ndimage.distance_transform_edt(truth == 0, sampling=grid.voxel_um) > BACKGROUND_UM
-        # beyond the resolution too: farther than 10 µm laterally or than FWHM_z (20.7 µm) along z
+        # beyond the resolution too: outside the support grown by 10 µm laterally and FWHM_z along z
         scaled = (DZ_UM * BACKGROUND_UM / AXIAL_UM, rec.pixel_um, rec.pixel_um)
         beyond = ndimage.distance_transform_edt(truth == 0, sampling=scaled) > BACKGROUND_UM
         cell = moving(p)
