@@ -25,6 +25,7 @@ from napari_ssdpc._napari.widgets.common import (
     show_layer,
 )
 from napari_ssdpc._napari.widgets.jobs import JobRunner
+from napari_ssdpc._napari.widgets.live import LiveFollow
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.pipeline.run import Pipeline
 from napari_ssdpc.pipeline.sinks import MemorySink, ZarrSink
@@ -135,6 +136,7 @@ class ReconstructWidget(StepWidget):
             "from disk (the series is never held in memory; a rerun resumes); empty: keep the frames in memory"
         )
         self.run_button, self.cancel_button, self.status = run_buttons("Reconstruct", "RI volume of the frame(s)")
+        self.live = LiveFollow(self)  # a recording still being written, into the same store
         self.extend(
             [
                 self.raw,
@@ -146,12 +148,13 @@ class ReconstructWidget(StepWidget):
                 self.store,
                 *self.outputs.values(),
                 self.run_button,
+                *self.live.widgets,
                 self.cancel_button,
                 self.status,
             ]
         )
         self.runner = JobRunner("Reconstruct", self.run_button, self.cancel_button, self.status)
-        self._watch, self._shown_frames = None, -1  # the store being written, shown as it grows
+        self._watch, self.shown_frames = None, -1  # the store being written, shown as it grows
         self.run_button.changed.connect(self.run)
         self.session.optics_loaded.connect(self._defaults)
         self.session.settings_loaded.connect(self.show_settings)
@@ -265,22 +268,28 @@ class ReconstructWidget(StepWidget):
 
         worker = self.runner.start(work, lambda rec: self._streamed(job, rec, store), "Reconstruct")
         if worker is not None:
-            self._shown_frames = -1
+            self.shown_frames = -1
             self._watch = QTimer()
-            self._watch.timeout.connect(lambda: self._show_store(store))
+            self._watch.timeout.connect(lambda: self.show_store(store))
             self._watch.start(WATCH_MS)
         return worker
 
-    def _show_store(self, store: Path) -> None:
-        """Show the store's frames written so far (unwritten frames are NaN); stop with the job."""
+    def show_store(self, store: Path) -> None:
+        """Show the store's frames written so far (unwritten frames are NaN); stop with the job.
+
+        Parameters
+        ----------
+        store : Path
+            The OME-Zarr series store being written.
+        """
         from napari_ssdpc._napari.reader import read_result
         from napari_ssdpc.io.store import done_frames
 
         running = self.runner.running
         if store.is_dir() and (store / "ri").is_dir():
             n = len(done_frames(store))
-            if n != self._shown_frames and n > 0:
-                self._shown_frames = n
+            if n != self.shown_frames and n > 0:
+                self.shown_frames = n
                 for data, kwargs, kind in read_result(store):
                     if kwargs["name"] in self.viewer.layers:  # new frames: keep the display as it is
                         kwargs = {k: v for k, v in kwargs.items() if k != "contrast_limits"}
@@ -292,8 +301,8 @@ class ReconstructWidget(StepWidget):
     def _streamed(self, job, rec, store: Path):
         self.session.built = (job, rec)
         self.session.operators_built.emit(rec)
-        self._show_store(store)
-        return f"{store.name}: {self._shown_frames} frames written; {resolution_text(axial_fwhm_um(rec.optics))}"
+        self.show_store(store)
+        return f"{store.name}: {self.shown_frames} frames written; {resolution_text(axial_fwhm_um(rec.optics))}"
 
     def _done(self, job, source, indices, rec, arrays, res):
         self.session.built = (job, rec)
