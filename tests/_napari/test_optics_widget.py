@@ -66,3 +66,31 @@ def test_the_widget_shows_the_short_design_table(make_napari_viewer):
     ow.set_optics(optics)
     assert ow.design.value == design_table(optics, short=True)
     assert "FOV 122.5 µm" in ow.design.value and "Field of view D_FOV (Eq. 10)" in design_table(optics)
+
+
+@pytest.mark.parametrize("dock_first", [True, False], ids=["dock, then sample", "sample, then dock"])
+def test_the_sample_brings_its_own_optics(make_napari_viewer, monkeypatch, dock_first):
+    """The bead sample is simulated at condenser NA 0.3 (the paper optics have 0.1) on a 1024 px
+    region: opening it makes those the optics, in either order, and the tabs show them."""
+    from napari_ssdpc._napari import notify
+    from napari_ssdpc._napari.sample_data import bead_frames
+
+    notes = []
+    monkeypatch.setattr(notify, "info", lambda msg: notes.append(str(msg)))
+    viewer = make_napari_viewer()
+    if dock_first:
+        _, dock = viewer.window.add_plugin_dock_widget("napari-ssdpc", "ssDPC")
+        assert dock.session.optics == Optics.paper()
+    viewer.open_sample("napari-ssdpc", "pmma_bead")
+    if not dock_first:
+        _, dock = viewer.window.add_plugin_dock_widget("napari-ssdpc", "ssDPC")
+    optics = bead_frames()[3]
+    assert Optics.paper().condenser_na == 0.1 and optics.condenser_na == 0.3
+    assert dock.session.optics == optics
+    w = dock.tabs["Optics"]
+    assert w.fields["condenser_na"].value == 0.3 and w.fields["width_px"].value == optics.width_px == 1024
+    assert sum("adopted" in n for n in notes) == 1 and "condenser NA 0.3" in notes[-1]
+    # an edit after opening is kept: the optics are adopted when frames arrive, not again and again
+    w.fields["condenser_na"].value = 0.25
+    viewer.add_image(viewer.layers["PMMA bead"].data[:8, :8], name="crop")  # no optics: nothing adopted
+    assert dock.session.optics.condenser_na == 0.25 and sum("adopted" in n for n in notes) == 1

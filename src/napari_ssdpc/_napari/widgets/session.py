@@ -237,10 +237,47 @@ def session_for(viewer) -> Session:
         session = Session()
         _SESSIONS[key] = (weakref.ref(viewer), session)
         follow_optics(viewer, session)  # frames shown in µm follow edits of the optics
+        adopt_frame_optics(viewer, session)  # the sample brings its own optics
         follow_results(viewer)  # the first result is brought into view, however it arrives
         prefer_own_readers()  # the plugin's own files open without napari's "Choose reader"
         weakref.finalize(viewer, _SESSIONS.pop, key, None)  # free the operators with the viewer
     return session
+
+
+def adopt_frame_optics(viewer, session: Session) -> None:
+    """Raw frames that carry their optics (the sample data) make them the session's when they arrive.
+
+    The sample's frames are only right with the optics they were simulated with (the bead: condenser
+    NA 0.3; the moving sample: water): the Optics tab shows them and the other tabs reset their
+    defaults, as after **Load YAML**. Layers already in the viewer count too (the sample opened
+    before the dock). Nothing happens when the optics are already the session's.
+
+    Parameters
+    ----------
+    viewer : napari.Viewer
+    session : Session
+    """
+    from napari_ssdpc._napari import notify
+
+    def adopt(layer) -> None:
+        meta = layer.metadata.get("ssdpc", {})
+        if meta.get("kind") != "raw" or not meta.get("optics"):
+            return
+        try:
+            optics = Optics.from_dict(meta["optics"], source=f"layer '{layer.name}'")
+        except SsdpcError as e:
+            notify.warning(f"{e}; the optics stay as they were")
+            return
+        if optics != session.optics:
+            session.set_optics(optics, loaded=True)
+            notify.info(
+                f"optics of '{layer.name}' adopted: {optics.name} (condenser NA {optics.condenser_na:g}, "
+                f"medium n {optics.medium_index:g})"
+            )
+
+    viewer.layers.events.inserted.connect(lambda e: adopt(e.value))
+    for layer in viewer.layers:
+        adopt(layer)
 
 
 def calibration_of(layer):
