@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 from magicgui.widgets import ComboBox, FileEdit, SpinBox
 
 from napari_ssdpc._napari import notify
@@ -61,6 +62,15 @@ def keep_view(viewer):
     return restore
 
 
+def _capture(animation, steps: int = 15) -> None:
+    """Add the current view as a key frame: ``Animation.capture_keyframe`` without the thumbnail,
+    which costs a full render of the canvas on the GUI thread (the widget shows no key frames)."""
+    from napari_animation import KeyFrame, ViewerState
+
+    thumbnail = np.zeros((32, 32, 4), np.uint8)
+    animation.key_frames.append(KeyFrame(ViewerState.from_viewer(animation.viewer), thumbnail, steps=steps))
+
+
 def plan_movie(viewer, layer, kind: str = "turn in 3D", seconds: float = 4.0, fps: int = 20):
     """Capture the key frames of a movie of ``layer`` (only it shown, the view fitted to it).
 
@@ -91,9 +101,9 @@ def plan_movie(viewer, layer, kind: str = "turn in 3D", seconds: float = 4.0, fp
             raise ValueError(f"'{layer.name}' has no time axis; choose a (t, z, y, x) result or 'turn in 3D'")
         n = layer.data.shape[0]
         viewer.dims.set_current_step(0, 0)
-        animation.capture_keyframe()
+        _capture(animation)
         viewer.dims.set_current_step(0, n - 1)
-        animation.capture_keyframe(steps=max(n - 1, 1))
+        _capture(animation, steps=max(n - 1, 1))
     else:
         viewer.dims.ndisplay = 3
         steps = max(int(round(seconds * fps / 4)), 1)
@@ -101,7 +111,7 @@ def plan_movie(viewer, layer, kind: str = "turn in 3D", seconds: float = 4.0, fp
         elevation, _, roll = camera.angles
         for azimuth in (0.0, 90.0, 180.0, 270.0, 360.0):  # a quarter turn per key frame
             camera.angles = (elevation, azimuth, roll)
-            animation.capture_keyframe(steps=steps)
+            _capture(animation, steps=steps)
     return animation
 
 
