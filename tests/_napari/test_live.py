@@ -57,10 +57,10 @@ def test_a_recording_being_written_grows_the_layer_and_a_rerun_recomputes_nothin
     raw, store = tmp_path / "camera.tif", tmp_path / "live.zarr"
     rc.store.value, rc.live.recording.value, rc.live.idle.value = store, raw, 1.5
     growth = []  # the RI layer's time points each time it changes
-    camera = _camera(raw, frames, PAUSE_S)
-    qtbot.waitUntil(raw.exists, timeout=5000)  # the camera has started its file
-    worker = rc.live.start()
+    worker = rc.live.start()  # before the camera has started: it waits for the file
     assert worker is not None and not rc.live.button.enabled
+    qtbot.wait(300)
+    camera = _camera(raw, frames, PAUSE_S)
     viewer.layers.events.inserted.connect(
         lambda e: (
             e.value.name == "live RI" and e.value.events.data.connect(lambda _: growth.append(e.value.data.shape[0]))

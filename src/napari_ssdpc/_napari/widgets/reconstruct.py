@@ -133,7 +133,8 @@ class ReconstructWidget(StepWidget):
         self.store.label = "series to"
         self.store.tooltip = (
             "OME-Zarr folder (NAME.zarr) for 'all frames': each frame is written as it finishes and shown "
-            "from disk (the series is never held in memory; a rerun resumes); empty: keep the frames in memory"
+            "from disk (the series is never held in memory; a rerun resumes); empty: keep the frames in memory. "
+            "Also the store that 'Follow a recording' writes"
         )
         self.run_button, self.cancel_button, self.status = run_buttons("Reconstruct", "RI volume of the frame(s)")
         self.live = LiveFollow(self)  # a recording still being written, into the same store
