@@ -3,6 +3,8 @@ written as a job with progress and Cancel; the view is restored afterwards, also
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
@@ -104,3 +106,31 @@ def test_cancel_stops_the_movie_leaves_no_file_and_restores_the_view(make_napari
     _steps.wait_for(qtbot, w)
     assert len(shown) == 1 and "bead.gif" in shown[0] and w.status.value.startswith("error:")
     assert _view(viewer) == view
+
+
+def test_a_frame_that_fails_to_render_stops_the_movie_with_one_line(make_napari_viewer, qtbot, tmp_path, monkeypatch):
+    from napari_ssdpc._napari.widgets import movie
+
+    shown = []
+    monkeypatch.setattr(_notify, "error", lambda msg: shown.append(str(msg)))
+    render = movie.render_frame
+
+    def failing(animation, i):  # the canvas fails at the fourth frame (a lost OpenGL context, say)
+        if i == 3:
+            raise RuntimeError("no OpenGL context")
+        return render(animation, i)
+
+    monkeypatch.setattr(movie, "render_frame", failing)
+    viewer = make_napari_viewer(show=True)
+    data, kwargs, _ = _bead()
+    viewer.add_image(data, **kwargs)
+    view = _view(viewer)
+    w = MovieWidget(viewer)
+    w.reset_choices()
+    w.kind.value, w.seconds.value, w.fps.value = "turn in 3D", 1, 20
+    w.path.value = out = tmp_path / "bead.gif"
+    start = time.monotonic()
+    w.export()
+    _steps.wait_for(qtbot, w)
+    assert time.monotonic() - start < 20 and not out.exists() and _view(viewer) == view
+    assert shown == ["movie frame 4 could not be rendered (RuntimeError: no OpenGL context); export again"]

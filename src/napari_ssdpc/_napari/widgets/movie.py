@@ -287,7 +287,23 @@ class MovieWidget(StepWidget):
             restore()
             notify.error(e)
             return None
-        render = ensure_main_thread(lambda i: render_frame(animation, i), await_return=True, timeout=RENDER_TIMEOUT_MS)
+
+        def on_gui(i):
+            try:
+                return render_frame(animation, i)
+            except Exception as e:  # handed back to the helper thread, which names it
+                return e
+
+        on_gui_thread = ensure_main_thread(on_gui, await_return=True, timeout=RENDER_TIMEOUT_MS)
+
+        def render(i):
+            image = on_gui_thread(i)
+            if isinstance(image, Exception):
+                raise SsdpcError(
+                    f"movie frame {i + 1} could not be rendered ({type(image).__name__}: {image}); export again"
+                )
+            return image
+
         fps = int(self.fps.value)
 
         def work(progress, should_stop):
