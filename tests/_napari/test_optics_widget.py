@@ -69,7 +69,7 @@ def test_the_widget_shows_the_short_design_table(make_napari_viewer):
 
 
 @pytest.mark.parametrize("dock_first", [True, False], ids=["dock, then sample", "sample, then dock"])
-def test_the_sample_brings_its_own_optics(make_napari_viewer, monkeypatch, dock_first):
+def test_the_sample_brings_its_own_optics(make_napari_viewer, monkeypatch, tmp_path, dock_first):
     """The bead sample is simulated at condenser NA 0.3 (the paper optics have 0.1) on a 1024 px
     region: opening it makes those the optics, in either order, and the tabs show them."""
     from napari_ssdpc._napari import notify
@@ -77,6 +77,7 @@ def test_the_sample_brings_its_own_optics(make_napari_viewer, monkeypatch, dock_
 
     notes = []
     monkeypatch.setattr(notify, "info", lambda msg: notes.append(str(msg)))
+    monkeypatch.setenv("NAPARI_SSDPC_CONFIG", str(tmp_path))  # nothing remembered from other tests
     viewer = make_napari_viewer()
     if dock_first:
         _, dock = viewer.window.add_plugin_dock_widget("napari-ssdpc", "ssDPC")

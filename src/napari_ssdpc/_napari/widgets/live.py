@@ -157,7 +157,13 @@ class LiveFollow:
         return work
 
     def show(self, store: Path) -> None:
-        """Show the store's frames written so far; note when each new frame of this run is shown."""
+        """Show the store's frames written so far; note when each new frame of this run is shown.
+
+        Parameters
+        ----------
+        store : Path
+            The OME-Zarr store being written.
+        """
         from napari_ssdpc.io.store import done_frames
 
         before = self.rc.shown_frames

@@ -30,7 +30,16 @@ RENDER_TIMEOUT_MS = 60_000
 
 
 def camera_of(viewer):
-    """The viewer's camera (``viewer.scene.camera`` since napari 0.9, ``viewer.camera`` before)."""
+    """The viewer's camera (``viewer.scene.camera`` since napari 0.9, ``viewer.camera`` before).
+
+    Parameters
+    ----------
+    viewer : napari.Viewer
+
+    Returns
+    -------
+    napari camera model
+    """
     scene = getattr(viewer, "scene", None)
     return scene.camera if scene is not None else viewer.camera
 
@@ -116,12 +125,33 @@ def plan_movie(viewer, layer, kind: str = "turn in 3D", seconds: float = 4.0, fp
 
 
 def movie_frames(animation) -> int:
-    """Images in the movie: one per interpolation step, and the first key frame."""
+    """Images in the movie: one per interpolation step, and the first key frame.
+
+    Parameters
+    ----------
+    animation : napari_animation.Animation
+
+    Returns
+    -------
+    int
+    """
     return int(sum(kf.steps for kf in animation.key_frames[1:])) + 1
 
 
 def render_frame(animation, index: int):
-    """The canvas at movie frame ``index``, (h, w, 4) RGBA uint8 (on the GUI thread)."""
+    """The canvas at movie frame ``index`` (on the GUI thread).
+
+    Parameters
+    ----------
+    animation : napari_animation.Animation
+    index : int
+        Movie frame.
+
+    Returns
+    -------
+    ndarray, uint8, (h, w, 4)
+        RGBA.
+    """
     animation.set_movie_frame_index(index)
     return animation.viewer.screenshot(canvas_only=True, flash=False)
 
