@@ -62,7 +62,8 @@ def run_on_dask(pipeline, source, sink, *, progress: bool = True, stop_after=Non
     client, cluster = _client(pipeline.workers, pipeline.scheduler)
     job = pipeline.job
     try:
-        grid = client.submit(_grid, job, pure=False).result()
+        job_f = client.scatter(job, broadcast=True)  # once per worker, not in every task (the flat is MBs)
+        grid = client.submit(_grid, job_f, pure=False).result()
         done = sink.open(job, grid, source)
         try:
             pending = [t for t in range(source.available()) if t not in done]
@@ -70,7 +71,6 @@ def run_on_dask(pipeline, source, sink, *, progress: bool = True, stop_after=Non
                 pending = pending[: int(stop_after)]
             t0 = time.perf_counter()
             bar = frame_bar(source.available(), len(done), progress)
-            job_f = client.scatter(job, broadcast=True)
             futures = [client.submit(_process, job_f, source, t, str(sink.out), sink.save, pure=False) for t in pending]
             timings = []
             for fut in as_completed(futures):
