@@ -95,3 +95,23 @@ def test_the_sample_brings_its_own_optics(make_napari_viewer, monkeypatch, tmp_p
     w.fields["condenser_na"].value = 0.25
     viewer.add_image(viewer.layers["PMMA bead"].data[:8, :8], name="crop")  # no optics: nothing adopted
     assert dock.session.optics.condenser_na == 0.25 and sum("adopted" in n for n in notes) == 1
+
+
+def test_from_selected_layer_adopts_the_optics_and_keeps_the_users_settings(make_napari_viewer, monkeypatch, tmp_path):
+    """'From selected layer' takes the layer's optics; the z range, method and α the user set stay."""
+    from napari_ssdpc._napari.sample_data import bead_frames
+
+    monkeypatch.setenv("NAPARI_SSDPC_CONFIG", str(tmp_path))  # nothing remembered from other tests
+    viewer = make_napari_viewer()
+    _, dock = viewer.window.add_plugin_dock_widget("napari-ssdpc", "ssDPC")
+    frame, _, _, optics = bead_frames()
+    layer = viewer.add_image(frame, name="bead", metadata={"ssdpc": {"optics": optics.to_dict()}})
+    ow, op, rc = (dock.tabs[name] for name in ("Optics", "Method", "Reconstruct"))
+    ow.set_optics(Optics.paper())  # another instrument loaded after the frame arrived
+    op.z_min.value, op.z_max.value, op.dz.value, op.method.value = -12.0, 18.0, 3.0, "wotf"
+    rc.alpha.value = 0.05
+    viewer.layers.selection.active = layer
+    ow.layer_button.clicked.emit()
+    assert dock.session.optics == optics and ow.fields["condenser_na"].value == optics.condenser_na
+    assert (op.z_min.value, op.z_max.value, op.dz.value, op.method.value) == (-12.0, 18.0, 3.0, "wotf")
+    assert rc.alpha.value == 0.05

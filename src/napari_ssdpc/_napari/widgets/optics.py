@@ -160,15 +160,18 @@ class OpticsWidget(StepWidget):
         self.design.value = design_table(optics, short=True)
         self.session.set_optics(optics)
 
-    def set_optics(self, optics: Optics):
-        """Show ``optics`` and make it the session's (the other widgets reset their defaults).
+    def set_optics(self, optics: Optics, reset: bool = True):
+        """Show ``optics`` and make it the session's.
 
         Parameters
         ----------
         optics : Optics
+        reset : bool
+            The other widgets go back to their defaults (a new instrument: Load YAML); False keeps
+            the z range, method and α the user set (the optics of a layer already being worked on).
         """
         self._show(optics)
-        self.session.set_optics(optics, loaded=True)
+        self.session.set_optics(optics, loaded=reset)
 
     def load(self, *_):
         """Read the optics YAML named in the path field."""
@@ -205,6 +208,7 @@ class OpticsWidget(StepWidget):
             notify.error("the selected layer carries no optics; select a sample-data layer or load a YAML")
             return
         try:
-            self.set_optics(catching_warnings(Optics.from_dict, d, source=f"layer '{layer.name}'"))
+            optics = catching_warnings(Optics.from_dict, d, source=f"layer '{layer.name}'")
+            self.set_optics(optics, reset=False)  # the user's z range, method and α stay
         except SsdpcError as e:
             notify.error(e)
