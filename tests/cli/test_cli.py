@@ -52,3 +52,27 @@ def test_napari_manifest_validates():
         [sys.executable, "-m", "npe2", "validate", "napari-ssdpc", "--imports"], capture_output=True, text=True
     )
     assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_simulate_names_the_phantoms_own_medium(tmp_path, monkeypatch, capsys):
+    """The moving sample lies in water: simulated with 1.33 whatever the optics say, and the note
+    says so, with what the calibration must use (the simulation itself is stubbed: only the note)."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    import napari_ssdpc.simulation.simulate as sim
+
+    media = []
+
+    def fake(phantom, optics, **kw):
+        media.append(optics.medium_index)
+        return SimpleNamespace(frame=np.zeros((optics.height_px, optics.width_px), np.uint16))
+
+    monkeypatch.setattr(sim, "simulate", fake)
+    from napari_ssdpc.cli.main import main
+
+    assert main(["simulate", "moving", "--frames", "2", "-o", str(tmp_path / "m.tif")]) == 0
+    err = capsys.readouterr().err
+    assert media == [1.33, 1.33]
+    assert "medium of index 1.33, not the optics' 1.518" in err and "labelled +0.188 off" in err

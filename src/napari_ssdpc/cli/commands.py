@@ -186,7 +186,15 @@ def cmd_simulate(args):
     outs = check_outputs({k: v for k, v in wanted.items() if v}, {"optics file": args.optics}, overwrite=args.overwrite)
     optics = _optics(args.optics)
     _check_simulate_numbers(args, optics)
+    given = optics.medium_index
     phantom, optics = make_phantom(args.phantom, optics, n_frames=args.frames)
+    if optics.medium_index != given:  # the phantom's own medium: the calibration must say the same
+        print(
+            f"note: the '{args.phantom}' phantom lies in a medium of index {optics.medium_index:g}, not the optics' "
+            f"{given:g}: simulated with {optics.medium_index:g}; calibrate with optics whose medium_index is "
+            f"{optics.medium_index:g}, or every RI is labelled {given - optics.medium_index:+.3f} off",
+            file=sys.stderr,
+        )
     grid = Grid.nominal(optics, axis_offset_px=tuple(args.offset), rotation_deg=args.rotation)
     rng = np.random.default_rng(args.seed)
     phantoms = phantom if isinstance(phantom, list) else [phantom]
