@@ -143,7 +143,7 @@ def measure(dn, truth, rec, base=None):
 
 def quadratic_prox(v, p, mu, gamma, xp=np):
     """argmin_z μ|z| + (g/2)(z − p)² + ½(z − v)² with g = γ/μ (the weight itself): the quadratic
-    alternative to :func:`~napari_ssdpc.reconstruction.regularised.prox_two_kinks`."""
+    alternative to :func:`~napari_ssdpc.reconstruction.proximal.prox_two_kinks`."""
     g = np.float32(gamma / mu)
     m, t = (v + g * p) / (1 + g), np.float32(mu) / (1 + g)
     return (m - xp.clip(m, -t, t)).astype(np.float32)

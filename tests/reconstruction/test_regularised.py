@@ -8,7 +8,8 @@ import scipy.fft as sfft
 
 from napari_ssdpc.physics import transfer
 from napari_ssdpc.reconstruction.forward import ViewModel, padded_planes
-from napari_ssdpc.reconstruction.regularised import TvInversion, prox_two_kinks
+from napari_ssdpc.reconstruction.proximal import prox_two_kinks
+from napari_ssdpc.reconstruction.regularised import TvInversion
 from napari_ssdpc.settings.optics import Optics
 
 

@@ -32,6 +32,7 @@ __all__ = [
     "cmd_simulate",
     "make_phantom",
     "output_paths",
+    "report_series",
 ]
 
 PHANTOMS = ("bead", "two-beads", "cell", "bars", "moving")
@@ -241,6 +242,7 @@ def cmd_reconstruct(args):
         The parsed options of `ssdpc reconstruct` (see ``ssdpc reconstruct --help``).
     """
     from napari_ssdpc.calibration.result import Calibration
+    from napari_ssdpc.cli.follow import follow_recording, followed
     from napari_ssdpc.io.frame_source import StoredFrames
     from napari_ssdpc.io.frames import read_frame
     from napari_ssdpc.pipeline.job import Job
@@ -281,7 +283,7 @@ def cmd_reconstruct(args):
     cal = Calibration.from_json(args.calibration)
     cfg = run_config(args, None if args.optics is None else _optics(args.optics), fallback=cal.optics)
     if follow:
-        source = _followed(args.raw, args.idle)
+        source = followed(args.raw, args.idle)
     else:
         source = StoredFrames(args.raw if is_zarr else read_frame(args.raw))  # a series streams, frame by frame
     flat = read_frame(args.flat, allow_series=False, name="flat frame") if args.flat else None
@@ -296,10 +298,10 @@ def cmd_reconstruct(args):
     with tqdm_callback("building operators", unit="plane", disable=distributed) as cb:
         pipeline = Pipeline(Job(cfg, cal, flat), progress=cb, workers=args.workers, scheduler=args.scheduler)
     if follow:
-        _follow(pipeline, source, sink, out, cfg.outputs.save)
+        follow_recording(pipeline, source, sink, out, cfg.outputs.save)
         return
     if is_zarr:
-        _report_series(pipeline.run(source, sink), out, cfg.outputs.save)
+        report_series(pipeline.run(source, sink), out, cfg.outputs.save)
         return
     with tqdm_callback("reconstructing", unit="iteration") as cb:
         pipeline.run(source, sink, iteration_progress=cb, progress=False)
@@ -312,37 +314,17 @@ def cmd_reconstruct(args):
     )
 
 
-def _followed(path, idle_s):
-    """The recording to follow, once its first frame has arrived."""
-    from napari_ssdpc.io.followed import FollowedFrames
+def report_series(report, out, save):
+    """Print what a series run wrote (or that every frame was there already).
 
-    print(f"following {path}: waiting for frames (Ctrl-C stops; a rerun resumes)", file=sys.stderr, flush=True)
-    return FollowedFrames(path, idle_s=idle_s)
-
-
-def _follow(pipeline, source, sink, out, save):
-    """Reconstruct a recording as it is written; report the latency from frame on disk to result."""
-    import time
-
-    latency = []
-
-    def written(t, done, total, result):
-        latency.append(time.time() - source.arrived_at.get(t, time.time()))
-
-    try:
-        report = pipeline.run(source, sink, on_frame=written, progress=True)
-    finally:
-        if latency:
-            print(
-                f"{len(latency)} frames followed; latency from frame on disk to result {np.median(latency):.2f} s "
-                f"(median), {max(latency):.2f} s (max)",
-                file=sys.stderr,
-            )
-    print(f"no new frame for {source.idle_s:g} s: stopped", file=sys.stderr)
-    _report_series(report, out, save)
-
-
-def _report_series(report, out, save):
+    Parameters
+    ----------
+    report : RunReport
+    out : Path
+        The store.
+    save : list of str
+        Quantities beside RI.
+    """
     names = ", ".join(["ri", *save])
     if report.written == 0:
         print(f"{out}: all {report.frames} frames were already written ({names})")

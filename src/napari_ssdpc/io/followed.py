@@ -88,7 +88,6 @@ class FollowedFrames:
         self._count, self._ready, self._files, self._gaps_named = 0, 0, [], set()
         self._signature, self._changed = None, time.monotonic()
         self._last_arrival = time.monotonic()
-        self._reader = None
         wait_s = self.idle_s if first_wait_s is None else float(first_wait_s)
         deadline = time.monotonic() + wait_s
         while self._scan() == 0:
@@ -181,7 +180,6 @@ class FollowedFrames:
         """(frames present, a signature that changes whenever the recording does)."""
         if self.kind == "tiff":
             st = self.path.stat()
-            self._reader = None  # reopened: the file has grown
             return self._tiff_pages(st.st_size), (st.st_size, st.st_mtime_ns)
         if self.kind == "zarr":
             array = self._zarr()

@@ -46,10 +46,11 @@ import scipy.fft as sfft
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.reconstruction.backend import in_threads
 from napari_ssdpc.reconstruction.forward import ViewModel, apply
+from napari_ssdpc.reconstruction.proximal import bounds, prox_two_kinks
 from napari_ssdpc.reconstruction.tv_report import TvReport
 from napari_ssdpc.settings.reconstruction import SIGNS
 
-__all__ = ["LAMBDA_PER_NOISE", "TvInversion", "TvState", "bounds", "prox_two_kinks"]
+__all__ = ["LAMBDA_PER_NOISE", "TvInversion", "TvState"]
 
 #: ℓ of the sparsity term μ‖φ‖₁ with μ = λ/ℓ, in units of the axial resolution R_z: without it a
 #: constant offset inside the field stop (the unmeasured slice mean) costs only its boundary.
@@ -458,51 +459,3 @@ class TvInversion:
             return tv
 
         return self._parts(part)
-
-
-def prox_two_kinks(v, p, mu, gamma, xp=np):
-    """argmin_z μ|z| + γ|z − p| + ½(z − v)², elementwise: the sparsity and the temporal prior.
-
-    The sum of two absolute values has its kinks at lo = min(0, p) and hi = max(0, p), with the
-    weights w_lo and w_hi of the terms that sit there; the minimiser is v + w_lo + w_hi where that
-    lies below lo, v − w_lo − w_hi where that lies above hi, and else v − w_lo + w_hi clipped to
-    [lo, hi]. With p = 0 it is the shrinkage by μ + γ. A box constraint (the sign and the bound)
-    is then a clip: the function is convex in one variable.
-
-    Parameters
-    ----------
-    v, p : array, float32, same shape
-        The point and the prior (the previous frame's phase), rad.
-    mu, gamma : float
-        The weights of |z| and |z − p| (≥ 0), in the units of v.
-    xp : module
-        NumPy or CuPy.
-
-    Returns
-    -------
-    array, float32, shaped like v
-    """
-    mu, gamma = np.float32(mu), np.float32(gamma)
-    lo, hi = xp.minimum(p, 0), xp.maximum(p, 0)
-    # p ≥ 0: |z| kinks at lo = 0 (w_lo = μ), |z − p| at hi (w_hi = γ); p < 0: the other way round
-    inner = xp.where(p >= 0, v - mu + gamma, v - gamma + mu)
-    z = xp.clip(inner, lo, hi)
-    total = mu + gamma
-    below, above = v + total, v - total
-    z = xp.where(below < lo, below, z)
-    return xp.where(above > hi, above, z).astype(np.float32, copy=False)
-
-
-def bounds(sign, phi_max) -> tuple[float, float]:
-    """(lo, hi) of φ for a sign constraint and a bound |φ| ≤ φ_max (any unit: Δn too).
-
-    Parameters
-    ----------
-    sign : {'denser', 'lighter', 'any'}
-    phi_max : float
-
-    Returns
-    -------
-    tuple of float
-    """
-    return (0.0 if sign == "denser" else -phi_max, 0.0 if sign == "lighter" else phi_max)

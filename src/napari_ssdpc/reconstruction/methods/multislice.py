@@ -32,7 +32,7 @@ from napari_ssdpc.physics.views_multislice import ViewsMultislice, square_roi
 from napari_ssdpc.reconstruction.checks import available_memory
 from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
 from napari_ssdpc.reconstruction.methods.tv import TvMethod
-from napari_ssdpc.reconstruction.regularised import bounds
+from napari_ssdpc.reconstruction.proximal import bounds
 
 __all__ = ["MultisliceMethod", "object_windows", "objects_roi"]
 
