@@ -18,7 +18,8 @@ import zarr.storage._local as zlocal
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.frame_source import StoredFrames
 from napari_ssdpc.io.ome_zarr import read_ome_zarr
-from napari_ssdpc.io.store import StoreLock, done_frames, read_complete
+from napari_ssdpc.io.store import done_frames, read_complete
+from napari_ssdpc.io.store_lock import StoreLock
 from napari_ssdpc.pipeline.job import Job
 from napari_ssdpc.pipeline.run import Pipeline
 from napari_ssdpc.pipeline.sinks import ZarrSink
@@ -172,7 +173,7 @@ def test_a_foreign_folder_or_file_is_refused_untouched(setup, tmp_path):
 
 _HOLD = """
 import sys, time
-from napari_ssdpc.io.store import StoreLock
+from napari_ssdpc.io.store_lock import StoreLock
 with StoreLock(sys.argv[1]):
     print("held", flush=True)
     time.sleep(60)

@@ -18,7 +18,8 @@ import numpy as np
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.frames import write_ome_tiffs
-from napari_ssdpc.io.store import StoreLock, grow_store, open_store, write_frame
+from napari_ssdpc.io.store import grow_store, open_store, write_frame
+from napari_ssdpc.io.store_lock import StoreLock
 from napari_ssdpc.settings.outputs import layout, parse_save
 
 __all__ = ["MemorySink", "OmeTiffSink", "OutputGrid", "Sink", "ZarrSink"]
