@@ -87,6 +87,7 @@ class FollowedFrames:
         self._lock = threading.Lock()
         self._count, self._ready, self._files, self._gaps_named = 0, 0, [], set()
         self._signature, self._changed = None, time.monotonic()
+        self._pages = 0  # complete pages of a TIFF at its last signature
         self._last_arrival = time.monotonic()
         wait_s = self.idle_s if first_wait_s is None else float(first_wait_s)
         deadline = time.monotonic() + wait_s
@@ -180,7 +181,10 @@ class FollowedFrames:
         """(frames present, a signature that changes whenever the recording does)."""
         if self.kind == "tiff":
             st = self.path.stat()
-            return self._tiff_pages(st.st_size), (st.st_size, st.st_mtime_ns)
+            signature = (st.st_size, st.st_mtime_ns)
+            if signature != self._signature:  # the pages are parsed again only when the file changed
+                self._pages = self._tiff_pages(st.st_size)
+            return self._pages, signature
         if self.kind == "zarr":
             array = self._zarr()
             newest = max((e.stat().st_mtime_ns for e in _entries(self._level_dir)), default=0)
