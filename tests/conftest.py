@@ -1,3 +1,4 @@
+import gc
 import os
 from pathlib import Path
 
@@ -88,3 +89,13 @@ def pytest_collection_modifyitems(config, items):
 def _own_settings_folder(tmp_path_factory):
     """The napari dock remembers its settings between sessions: keep the tests' out of the home folder."""
     os.environ["NAPARI_SSDPC_CONFIG"] = str(tmp_path_factory.mktemp("ssdpc-config"))
+
+
+@pytest.fixture(autouse=True)
+def _gui_garbage_collected_here(request):
+    """After a GUI test, collect its garbage (viewers, widgets, layers) on the main thread. Left to
+    the collector, it may run in whatever thread allocates next (zarr's I/O loop, a Dask worker),
+    and Qt objects must not be destroyed there."""
+    yield
+    if _GUI_FIXTURES & set(request.fixturenames):
+        gc.collect()

@@ -8,6 +8,7 @@ unknown length (:class:`~.sources.LiveFrames`) is followed until it is finished.
 
 from __future__ import annotations
 
+import re
 import sys
 import time
 from dataclasses import dataclass, field
@@ -90,6 +91,10 @@ def process_frame(rec, source: FrameSource, t: int, sink: Sink, *, warm=None, pr
     return timing, result
 
 
+#: A Dask scheduler's address: ``protocol://host:port`` or ``host:port``.
+_SCHEDULER = re.compile(r"(?:[a-z][a-z0-9+]*://)?[^\s/:]+:\d{1,5}|[a-z][a-z0-9+]*://[^\s]+")
+
+
 class Pipeline:
     """One job, built once; :meth:`run` streams any frame source into any sink.
 
@@ -112,6 +117,10 @@ class Pipeline:
             raise SsdpcError(f"Pipeline takes a Job (configuration, calibration, flat), got {type(job).__name__}")
         if workers is not None and workers < 1:
             raise SsdpcError(f"--workers must be >= 1, got {workers}")
+        if scheduler is not None and not _SCHEDULER.fullmatch(str(scheduler)):
+            raise SsdpcError(
+                f"Dask scheduler address {scheduler!r}: give it as tcp://host:port (e.g. tcp://10.0.0.5:8786)"
+            )
         self.job = job
         self.distributed = workers is not None or scheduler is not None
         self.workers, self.scheduler = workers, scheduler
