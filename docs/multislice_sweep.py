@@ -24,6 +24,7 @@ import numpy as np
 
 from napari_ssdpc.simulation import phantoms as ph
 from napari_ssdpc.validation import cases as val
+from napari_ssdpc.validation.mass import mass_and_tail
 
 HERE = Path(__file__).parent
 WATER, OIL = 1.333, 1.518
@@ -55,26 +56,16 @@ RESOLUTION_UM = (20.7, 3.9)
 
 def measure(res, phantom, medium) -> dict:
     """Integrated Δn, tail, depth and peak (or correlation) of a result against its phantom."""
-    dn = res.delta_n.astype(float)
-    yy, xx = np.meshgrid(res.y_um, res.x_um, indexing="ij")
     cx, cy, cz = phantom.center_um
     bead = isinstance(phantom, ph.Sphere)
-    r_xy = phantom.diameter_um / 2 if bead else max(phantom.semi_axes_um)
-    r_z = phantom.diameter_um / 2 if bead else phantom.semi_axes_um[2]
-    disk = np.hypot(xx - cx, yy - cy) <= r_xy + 4.0
-    near = np.abs(res.z_um - cz) <= r_z + 8.0
-    truth = float(val.truth_volume(phantom, res, medium).sum())
-    out = {
-        "integrated": float(dn[:, disk].sum() / truth),
-        "tail": float(np.abs(dn[~near][:, disk]).sum() / np.abs(dn[near][:, disk]).sum()),
-    }
+    out = mass_and_tail(res, phantom, medium)
     if bead:
         m = val.bead_metrics(res, phantom, medium)
         out.update(
             centroid_z=m["centroid_um"][2] - cz, dn_peak=m["dn_peak"], dn_true=m["dn_true"], ri_centre=m["ri_centre"]
         )
     else:
-        pos = dn.clip(0)
+        pos = res.delta_n.astype(float).clip(0)
         out["centroid_z"] = float((pos.sum(axis=(1, 2)) * res.z_um).sum() / pos.sum()) - cz
         out.update({k: float(v) for k, v in val.cell_metrics(res, phantom, RESOLUTION_UM).items() if np.isscalar(v)})
     return out

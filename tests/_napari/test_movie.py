@@ -78,10 +78,6 @@ def test_a_movie_needs_a_volume_and_a_file_name(make_napari_viewer, tmp_path, mo
     assert w.export() is None and ".mp4 or .gif" in shown[-1]
 
 
-@pytest.mark.skip(
-    reason="known defect: in a full test run the Cancel sometimes never reaches the render loop and the "
-    "601-frame export runs on (the job's finished signal not emitted in 180 s); passes alone; to be fixed"
-)
 def test_cancel_stops_the_movie_leaves_no_file_and_restores_the_view(make_napari_viewer, qtbot, tmp_path, monkeypatch):
     shown = []
     monkeypatch.setattr(_notify, "error", lambda msg: shown.append(str(msg)))

@@ -287,6 +287,12 @@ def test_10_the_demo_never_replaces_a_file_it_did_not_write(cli, tmp_path):
     ]
     rc, err = cli(["demo", "-o", folder, "--seed", "-1"])
     assert rc == 2 and "seed >= 0" in err
+    # the refinement's files are checked as well, before any work
+    (folder / "white.tif").unlink()
+    (folder / "refined.png").write_bytes(b"my figure")
+    rc, err = cli(["demo", "-o", folder, "--refine"])
+    assert rc == 2 and "refined.png would replace a file napari-ssdpc did not write" in err
+    assert (folder / "refined.png").read_bytes() == b"my figure"
 
 
 def test_10_files_we_wrote_are_known_as_ours(files, tmp_path):

@@ -374,7 +374,7 @@ def cmd_demo(args):
     args : argparse.Namespace
         The parsed options of `ssdpc demo` (see ``ssdpc demo --help``).
     """
-    from napari_ssdpc.validation.demo import DEMO_FILES, run_demo
+    from napari_ssdpc.validation.demo import DEMO_FILES, REFINE_FILES, run_demo
 
     _check_seed(args.seed)
     out = Path(args.output)
@@ -383,6 +383,6 @@ def cmd_demo(args):
         raise SsdpcError(f"demo folder {out} is a file; give a new folder name")
     if out.is_dir():
         writable_folder(out, "demo folder")
-        files = {name: out / name for name in DEMO_FILES}
-        check_outputs(files, {"optics file": args.optics}, overwrite=args.overwrite)
-    run_demo(out, optics=None if args.optics is None else _optics(args.optics), seed=args.seed)
+        names = DEMO_FILES + (REFINE_FILES if args.refine else ())
+        check_outputs({name: out / name for name in names}, {"optics file": args.optics}, overwrite=args.overwrite)
+    run_demo(out, optics=None if args.optics is None else _optics(args.optics), seed=args.seed, refine=args.refine)

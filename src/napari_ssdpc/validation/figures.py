@@ -86,3 +86,53 @@ def bead_figure(result, sphere, medium_index, path, title=""):
     fig.savefig(path, dpi=90, metadata={"Software": SOFTWARE})
     plt.close(fig)
     return path
+
+
+def comparison_figure(results: dict, sphere, medium_index, path, title=""):
+    """The same bead by several methods: per method (a row) the xz slice of the RI through the bead
+    centre, and the axial and lateral RI profiles against the truth.
+
+    Parameters
+    ----------
+    results : dict
+        {label: Result}, one row each, on the same grid.
+    sphere : Sphere
+        The truth.
+    medium_index : float
+    path : str or Path
+        The PNG.
+    title : str
+        Figure title; empty: none.
+
+    Returns
+    -------
+    str or Path
+        ``path``.
+    """
+    from napari_ssdpc.validation.cases import _index, truth_volume
+
+    plt = _plt()
+    first = next(iter(results.values()))
+    truth = medium_index + truth_volume(sphere, first, medium_index)
+    x, y, z = sphere.center_um
+    iz, iy, ix = _index(first, (z, y, x))
+    lim = max(max(float(np.abs(r.ri - medium_index).max()) for r in results.values()), 1e-6)
+    kw = dict(cmap="RdBu_r", vmin=medium_index - lim, vmax=medium_index + lim, aspect="auto")
+    rows = len(results)
+    fig, ax = plt.subplots(rows, 3, figsize=(12, 3.6 * rows), constrained_layout=True, squeeze=False)
+    for row, (label, r) in zip(ax, results.items()):
+        im = row[0].imshow(r.ri[:, iy, :], extent=(r.x_um[0], r.x_um[-1], r.z_um[-1], r.z_um[0]), **kw)
+        row[0].set(title=f"{label}: xz through the bead", xlabel="x (µm)", ylabel="z (µm)")
+        fig.colorbar(im, ax=row[0], label="refractive index")
+        row[1].plot(r.z_um, r.ri[:, iy, ix], label=label)
+        row[1].plot(r.z_um, truth[:, iy, ix], "k--", label="truth")
+        row[1].set(title="axial profile", xlabel="z (µm)", ylabel="refractive index")
+        row[2].plot(r.x_um, r.ri[iz, iy], label=label)
+        row[2].plot(r.x_um, truth[iz, iy], "k--", label="truth")
+        row[2].set(title=f"lateral profile at z = {r.z_um[iz]:g} µm", xlabel="x (µm)")
+        row[2].legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
+    fig.savefig(path, dpi=90, metadata={"Software": SOFTWARE})
+    plt.close(fig)
+    return path
