@@ -7,9 +7,9 @@ import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcWarning
 from napari_ssdpc.physics.dpc_transfer import dpc_from_halves, dpc_transfer_functions
+from napari_ssdpc.physics.lattice import lenslet_case
 from napari_ssdpc.physics.pupil import axial_frequency
 from napari_ssdpc.physics.transfer import (
-    lenslet_case,
     lenslet_transfer_functions,
     paper_transfer_functions,
     weak_object_transfer_functions,

@@ -150,13 +150,13 @@ def test_the_fake_device_keeps_cupys_rules():
 
 
 def _tv_on(device):
-    from napari_ssdpc.physics import transfer
+    from napari_ssdpc.physics.lattice import lenslet_case
     from napari_ssdpc.reconstruction.forward import ViewModel, padded_planes
     from napari_ssdpc.reconstruction.regularised import TvInversion
     from napari_ssdpc.reconstruction.wotf import WotfInversion
 
     optics = Optics.paper().replace(condenser_na=0.3)
-    lenslets = [ln for ln in optics.lenslets() if transfer.lenslet_case(optics, ln) == "straddling"][:8]
+    lenslets = [ln for ln in optics.lenslets() if lenslet_case(optics, ln) == "straddling"][:8]
     yy, xx = np.mgrid[:64, :64]
     mask = np.hypot(yy - 32, xx - 32) < 30
     zs, planes = padded_planes(np.arange(-10.0, 10.1, 2.0), 20.0)

@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 from magicgui.widgets import Container, FileEdit, Label, PushButton
 from qtpy.QtWidgets import QScrollArea, QVBoxLayout, QWidget
-from scipy import ndimage
 
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.widgets.choices import LayerChoice, result_layer_choices
@@ -67,6 +66,8 @@ def sample_line(data, start, end, n: int | None = None):
     if lead:
         idx = tuple(int(np.clip(round(c), 0, data.shape[i] - 1)) for i, c in enumerate(start[:lead]))
         block = data[idx]
+    from scipy import ndimage  # on first use: the dock opens without it
+
     values = ndimage.map_coordinates(np.asarray(block, np.float32), coords[lead:], order=1, mode="nearest")
     return s, coords, values
 

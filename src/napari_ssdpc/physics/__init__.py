@@ -1,31 +1,10 @@
 """Physics of the Fourier light-field microscope: design calculator, lattice geometry, pupils,
-the wave-optics PSF (paper Eq. 6) and the weak-object transfer functions (paper Eqs. 2-4)."""
+the wave-optics PSF (paper Eq. 6) and the weak-object transfer functions (paper Eqs. 2-4).
 
-from napari_ssdpc.physics.design import design, design_table, design_warnings
-from napari_ssdpc.physics.dpc_transfer import dpc_transfer_functions
-from napari_ssdpc.physics.lattice import Grid
-from napari_ssdpc.physics.psf import LensletPSF, reference_psf
-from napari_ssdpc.physics.pupil import axial_frequency, eta, mean_tilt, soft_disk, subaperture_pupil
-from napari_ssdpc.physics.transfer import (
-    lenslet_case,
-    lenslet_transfer_functions,
-    weak_object_transfer_functions,
-)
+The names (listed in ``__init__.pyi``) load on first use: code that needs only the lattice (the
+calibration, napari's dock) does not import the FFT and PSF modules.
+"""
 
-__all__ = [
-    "Grid",
-    "LensletPSF",
-    "axial_frequency",
-    "design",
-    "design_table",
-    "design_warnings",
-    "dpc_transfer_functions",
-    "eta",
-    "lenslet_case",
-    "lenslet_transfer_functions",
-    "mean_tilt",
-    "reference_psf",
-    "soft_disk",
-    "subaperture_pupil",
-    "weak_object_transfer_functions",
-]
+import lazy_loader as _lazy
+
+__getattr__, __dir__, __all__ = _lazy.attach_stub(__name__, __file__)

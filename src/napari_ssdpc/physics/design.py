@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from napari_ssdpc.physics.transfer import lenslet_case
+from napari_ssdpc.physics.lattice import lenslet_case
 from napari_ssdpc.settings.lenslets import Lenslet
 from napari_ssdpc.settings.optics import Optics
 

@@ -15,7 +15,8 @@ import numpy as np
 import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
-from napari_ssdpc.physics.transfer import LensletSetup, lenslet_case, paper_transfer_functions
+from napari_ssdpc.physics.lattice import lenslet_case
+from napari_ssdpc.physics.transfer import LensletSetup, paper_transfer_functions
 from napari_ssdpc.settings.lenslets import HALVES, PAIRS
 from napari_ssdpc.settings.optics import Optics
 

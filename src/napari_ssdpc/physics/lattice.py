@@ -204,3 +204,26 @@ def xy_pair(values) -> tuple[float, float]:
     """
     x, y = values
     return float(x), float(y)
+
+
+def lenslet_case(optics: Optics, lenslet: Lenslet) -> str:
+    """Where a lenslet's sub-aperture lies relative to the source disk: the one lenslet-regime rule.
+
+    Parameters
+    ----------
+    optics : Optics
+    lenslet : Lenslet
+
+    Returns
+    -------
+    str
+        'inside' (wholly inside the source disk: incoherent, no first-order phase contrast),
+        'straddling' (DPC-like phase contrast) or 'outside' (dark field); docs/conventions.md.
+    """
+    d = math.hypot(*lenslet.u)
+    rho, rs = optics.subaperture_radius, optics.source_radius
+    if d + rho <= rs:
+        return "inside"
+    if d - rho >= rs:
+        return "outside"
+    return "straddling"

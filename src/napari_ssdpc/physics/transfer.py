@@ -35,12 +35,10 @@ import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.pupil import axial_frequency, soft_disk, subaperture_pupil
-from napari_ssdpc.settings.lenslets import Lenslet
 from napari_ssdpc.settings.optics import Optics
 
 __all__ = [
     "LensletSetup",
-    "lenslet_case",
     "lenslet_transfer_functions",
     "paper_transfer_functions",
     "weak_object_transfer_functions",
@@ -117,29 +115,6 @@ def _embed(a, shape):
 
 
 # ------------------------------------------------------------ the two models
-def lenslet_case(optics: Optics, lenslet: Lenslet) -> str:
-    """Where a lenslet's sub-aperture lies relative to the source disk: the one lenslet-regime rule.
-
-    Parameters
-    ----------
-    optics : Optics
-    lenslet : Lenslet
-
-    Returns
-    -------
-    str
-        'inside' (wholly inside the source disk: incoherent, no first-order phase contrast),
-        'straddling' (DPC-like phase contrast) or 'outside' (dark field); docs/conventions.md.
-    """
-    d = math.hypot(*lenslet.u)
-    rho, rs = optics.subaperture_radius, optics.source_radius
-    if d + rho <= rs:
-        return "inside"
-    if d - rho >= rs:
-        return "outside"
-    return "straddling"
-
-
 def _frequency_steps(shape, pixel_um):
     return tuple(1.0 / (n * pixel_um) for n in shape)
 

@@ -1,0 +1,27 @@
+from .design import design, design_table, design_warnings
+from .dpc_transfer import dpc_transfer_functions
+from .lattice import Grid, lenslet_case
+from .psf import LensletPSF, reference_psf
+from .pupil import axial_frequency, eta, mean_tilt, soft_disk, subaperture_pupil
+from .transfer import (
+    lenslet_transfer_functions,
+    weak_object_transfer_functions,
+)
+
+__all__ = [
+    "Grid",
+    "LensletPSF",
+    "axial_frequency",
+    "design",
+    "design_table",
+    "design_warnings",
+    "dpc_transfer_functions",
+    "eta",
+    "lenslet_case",
+    "lenslet_transfer_functions",
+    "mean_tilt",
+    "reference_psf",
+    "soft_disk",
+    "subaperture_pupil",
+    "weak_object_transfer_functions",
+]
