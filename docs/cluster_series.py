@@ -20,7 +20,7 @@ import tifffile
 from napari_ssdpc.cli.main import main as ssdpc
 from napari_ssdpc.io.ome_zarr import read_ome_zarr
 from napari_ssdpc.settings.optics import Optics
-from napari_ssdpc.simulation import phantoms as ph
+from napari_ssdpc.simulation import moving
 from napari_ssdpc.validation import cases as val
 
 
@@ -30,7 +30,7 @@ def main(argv=None):
     ap.add_argument("--frames", type=int, default=50)
     args = ap.parse_args(argv)
     optics = Optics.paper().replace(condenser_na=0.25)
-    case = val.simulate_case("moving20", ph.moving_sample(20), optics, cache_dir=args.cache, source_step=4)
+    case = val.simulate_case("moving20", moving.moving_sample(20), optics, cache_dir=args.cache, source_step=4)
     frames = np.concatenate([case.frame] * (args.frames // len(case.frame) + 1))[: args.frames]
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)

@@ -23,6 +23,7 @@ from scipy import ndimage
 
 from napari_ssdpc.analysis.objects import DEFAULT_RULE, FWHM_PER_SIGMA, measure_objects
 from napari_ssdpc.analysis.table import measure_series
+from napari_ssdpc.simulation import moving
 from napari_ssdpc.simulation import phantoms as ph
 
 DOCS = Path(__file__).resolve().parent
@@ -68,18 +69,18 @@ WEAK = {
     "weak cell (n 1.34, nucleus 1.345)": ("weakcell", ph.cell(n=1.34, n_nucleus=1.345)),
     "weak moving sample, frame 10 (n 1.34, inclusion 1.36)": (
         "weakmoving10",
-        ph.moving_sample(20, n=1.34, n_nucleus=1.36)[10],
+        moving.moving_sample(20, n=1.34, n_nucleus=1.36)[10],
     ),
 }
 STRONG = {
     "cell (n 1.37, nucleus 1.39: 6 rad)": ("cell", ph.cell()),
-    "moving sample, frame 10 (n 1.36, inclusion 1.42: 5.4 rad)": ("moving10", ph.moving_sample(20)[10]),
+    "moving sample, frame 10 (n 1.36, inclusion 1.42: 5.4 rad)": ("moving10", moving.moving_sample(20)[10]),
 }
 
 
 def truth_table() -> dict:
     out = {}
-    cases = {**WEAK, **STRONG, "moving sample, frame 0": ("", ph.moving_sample(20)[0])}
+    cases = {**WEAK, **STRONG, "moving sample, frame 0": ("", moving.moving_sample(20)[0])}
     for name, (_, phantom) in cases.items():
         runs = []
         for seed in range(5):
@@ -90,7 +91,7 @@ def truth_table() -> dict:
 
 
 def track_table() -> dict:
-    series = ph.moving_sample(20)
+    series = moving.moving_sample(20)
     rows = measure_series(((t, observed(p, t)) for t, p in enumerate(series)), Z, Y, X, n_medium=1.33)
     errors = [float(np.linalg.norm([r["x_um"], r["y_um"], r["z_um"]] - truth(p)[2])) for r, p in zip(rows, series)]
     masses = [r["dry_mass_pg"] for r in rows]

@@ -5,8 +5,8 @@ shifted by (3.7, −2.2) px and rotated by 0.4°, paper optics at condenser NA 0
 
 - ``glide``: a cell (8 x 5 x 3.5 µm semi-axes, n 1.34, nucleus n 1.355, in water) gliding
   (2, 1.3, 1.3) µm a frame in (x, y, z) beside a resting 6 µm bead (n 1.34)
-  (``phantoms.gliding_cell_and_bead``);
-- ``shape``: the same cell at rest, its semi-axes oscillating by 25% (``phantoms.changing_cell``).
+  (``simulation.moving.gliding_cell_and_bead``);
+- ``shape``: the same cell at rest, its semi-axes oscillating by 25% (``simulation.moving.changing_cell``).
 
 Each is reconstructed by 'tv' over z −40..40 µm every 1 µm (81 planes), warm-started (frame 0
 cold, each later frame from where the previous solve ended), once per temporal weight (weight 0:
@@ -47,6 +47,7 @@ from napari_ssdpc.pipeline.sinks import MemorySink
 from napari_ssdpc.reconstruction import regularised
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation import phantoms as ph
+from napari_ssdpc.simulation.moving import changing_cell, gliding_cell_and_bead
 from napari_ssdpc.validation import cases as val
 
 HERE = Path(__file__).parent
@@ -162,10 +163,10 @@ def main(argv=None):
     if args.quadratic:
         regularised.prox_two_kinks = quadratic_prox  # the z₂-step calls it by its module name
     optics = Optics.paper().replace(condenser_na=NA)
-    glide = ph.gliding_cell_and_bead(args.frames)
+    glide = gliding_cell_and_bead(args.frames)
     cases = {
         "glide": (glide, lambda p: ph.Cell(center_um=p.items[0].center_um, semi_axes_um=p.items[0].semi_axes_um)),
-        "shape": (ph.changing_cell(args.frames), lambda p: p),
+        "shape": (changing_cell(args.frames), lambda p: p),
     }
     cases = {k: v for k, v in cases.items() if k in args.series}
     bead = glide[0].items[2].center_um

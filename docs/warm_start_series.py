@@ -1,6 +1,6 @@
 """Warm starts along a series: 'tv' on a moving sample, every frame cold and warm-started (docs/performance.md).
 
-A swimmer (``phantoms.moving_sample``: a 18 x 10 x 8 µm ellipsoid with an inclusion, in water)
+A swimmer (``moving.moving_sample``: a 18 x 10 x 8 µm ellipsoid with an inclusion, in water)
 crosses the field, 3.7 µm in x, 1 µm in y and z per frame. Simulated by our multislice
 simulator (source step 4) with camera noise and the grid shifted by (3.7, −2.2) px and rotated
 by 0.4°, paper optics at condenser NA 0.25 (16 views), reconstructed over z −60..60 µm every
@@ -31,7 +31,7 @@ from napari_ssdpc.pipeline.job import Job
 from napari_ssdpc.pipeline.run import Pipeline
 from napari_ssdpc.pipeline.sinks import MemorySink
 from napari_ssdpc.settings.optics import Optics
-from napari_ssdpc.simulation import phantoms as ph
+from napari_ssdpc.simulation import moving
 from napari_ssdpc.validation import cases as val
 
 HERE = Path(__file__).parent
@@ -59,7 +59,7 @@ def main(argv=None):
     ap.add_argument("--cache", type=Path, required=True, help="folder of the simulated series (.npz)")
     ap.add_argument("--frames", type=int, default=20)
     args = ap.parse_args(argv)
-    phantoms = ph.moving_sample(args.frames)
+    phantoms = moving.moving_sample(args.frames)
     optics = Optics.paper().replace(condenser_na=NA)
     case = val.simulate_case(f"moving{args.frames}", phantoms, optics, cache_dir=args.cache, source_step=4)
     job = Job(val.run_config(case.optics, z=Z_UM, dz=DZ_UM, method="tv"), calibrate(case.white, case.optics), case.flat)

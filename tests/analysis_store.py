@@ -12,7 +12,7 @@ from napari_ssdpc.pipeline.sinks import OutputGrid, ZarrSink
 from napari_ssdpc.reconstruction.reconstructor import Result
 from napari_ssdpc.settings.config import RunConfig
 from napari_ssdpc.settings.optics import Optics
-from napari_ssdpc.simulation import phantoms
+from napari_ssdpc.simulation import moving
 
 DX = 0.8456
 Z = np.arange(-30.0, 31.0, 1.0)
@@ -55,7 +55,7 @@ def source(n):
 
 def write_moving_store(out):
     """A 6-frame store of the moving sample written by ZarrSink, frames 0-4 complete (5 never written)."""
-    series = phantoms.moving_sample(20)[:6]
+    series = moving.moving_sample(20)[:6]
     stored, optics = run_settings()
     sink = ZarrSink(out, meta={"software": SOFTWARE, "optics": optics})
     job = SimpleNamespace(result_key="k", config=SimpleNamespace(outputs=SimpleNamespace(store_digits=None)))

@@ -13,13 +13,13 @@ from napari_ssdpc.analysis.result_files import open_result
 from napari_ssdpc.analysis.table import COLUMNS, csv_path, measure_result, read_csv
 from napari_ssdpc.cli.main import main
 from napari_ssdpc.pipeline.sinks import OmeTiffSink
-from napari_ssdpc.simulation import phantoms
+from napari_ssdpc.simulation import moving, phantoms
 
 
 @pytest.fixture(scope="module")
 def store(tmp_path_factory):
     out = write_moving_store(tmp_path_factory.mktemp("measure") / "cells.zarr")
-    return out, phantoms.moving_sample(20)[:6]
+    return out, moving.moving_sample(20)[:6]
 
 
 def test_a_series_store_gives_one_track_with_the_truth_s_mass_and_path(store, capsys):
@@ -51,7 +51,7 @@ def test_the_grid_is_read_back_as_written(store):
     np.testing.assert_allclose(stored.x_um, X, rtol=1e-4, atol=1e-4)
     t, dn = next(iter(stored))
     assert t == 0 and dn.shape == (len(Z), len(Y), len(X))
-    np.testing.assert_allclose(dn, result(phantoms.moving_sample(20)[0], 0).delta_n, atol=1e-6)
+    np.testing.assert_allclose(dn, result(moving.moving_sample(20)[0], 0).delta_n, atol=1e-6)
 
 
 def test_an_ome_tiff_frame_and_the_python_api(tmp_path):

@@ -10,6 +10,7 @@ from napari_ssdpc.analysis.table import measure_series
 from napari_ssdpc.analysis.tracks import link_tracks
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.simulation import phantoms
+from napari_ssdpc.simulation.moving import moving_sample
 
 DX = 0.8456  # µm, the paper's object pixel
 Z = np.arange(-30.0, 31.0, 1.0)
@@ -47,8 +48,8 @@ CASES = {
     "weak bead": phantoms.weak_bead(center_um=(3.0, -2.0, 5.0)),
     "12 µm weak bead": phantoms.Sphere((3.0, -2.0, 5.0), 12.0, 1.525, medium_index=1.518),
     "cell": phantoms.cell(center_um=(-4.0, 6.0, -3.0)),
-    "moving sample, frame 0": phantoms.moving_sample(20)[0],
-    "moving sample, frame 10": phantoms.moving_sample(20)[10],
+    "moving sample, frame 0": moving_sample(20)[0],
+    "moving sample, frame 10": moving_sample(20)[10],
 }
 
 
@@ -134,7 +135,7 @@ def test_an_object_below_the_resolution_has_no_volume_but_its_mass():
 
 
 def test_a_moving_sample_gives_one_track_that_follows_the_truth():
-    series = phantoms.moving_sample(20)[:8]  # steps of 3.9 µm
+    series = moving_sample(20)[:8]  # steps of 3.9 µm
     frames = [(t, _observed(p, seed=t)[0]) for t, p in enumerate(series)]
     rows = measure_series(frames, Z, Y, X, n_medium=1.33)
     assert [r["t"] for r in rows] == list(range(8)) and {r["track"] for r in rows} == {1}
@@ -146,7 +147,7 @@ def test_a_moving_sample_gives_one_track_that_follows_the_truth():
 
 def test_a_resting_bead_beside_a_moving_sample_gives_two_tracks():
     bead = phantoms.Sphere((25.0, 20.0, 0.0), 10.0, 1.36, medium_index=1.33)
-    series = phantoms.moving_sample(20)[:6]
+    series = moving_sample(20)[:6]
     rng = np.random.default_rng(0)
     frames = [
         (t, _blurred(bead) + _blurred(p) + rng.normal(0, 6e-4, (len(Z), len(Y), len(X)))) for t, p in enumerate(series)

@@ -18,6 +18,7 @@ from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.physics.waves import propagate
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation.camera import Camera
+from napari_ssdpc.simulation.moving import moving_sample
 from napari_ssdpc.simulation.multislice import Sampling, Source, exit_field
 from napari_ssdpc.simulation.phantom_base import Composite
 from napari_ssdpc.simulation.phantoms import (
@@ -25,7 +26,6 @@ from napari_ssdpc.simulation.phantoms import (
     Spheres,
     bar_target,
     cell,
-    moving_sample,
     pmma_bead,
     two_beads,
 )
@@ -404,16 +404,16 @@ def test_pmma_bead_run_time_paper_optics():
 
 
 def test_the_temporal_prior_phantoms_move_and_change_as_documented():
-    from napari_ssdpc.simulation import phantoms as ph
+    from napari_ssdpc.simulation import moving
 
-    glide = ph.gliding_cell_and_bead(10)
+    glide = moving.gliding_cell_and_bead(10)
     cells = np.array([p.items[0].center_um for p in glide])
     assert np.allclose(np.diff(cells, axis=0), (2.0, 4 / 3, 4 / 3))  # µm a frame in x, y, z
     assert all(p.items[2] == glide[0].items[2] for p in glide)  # the bead rests
     assert glide[0].items[2].dn == pytest.approx(0.01)
-    shape = ph.changing_cell(8)
+    shape = moving.changing_cell(8)
     axes = np.array([c.semi_axes_um for c in shape])
     assert np.allclose(axes[2], (10.0, 3.75, 3.5)) and np.allclose(axes[0, :2], (8.0, 5.0))
     assert len({c.center_um for c in shape}) == 1
     with pytest.raises(SsdpcError, match="amplitude"):
-        ph.changing_cell(4, amplitude=0.8)
+        moving.changing_cell(4, amplitude=0.8)

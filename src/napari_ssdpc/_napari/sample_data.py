@@ -5,7 +5,7 @@
   with a 1024 x 1024 px camera region that holds the whole pupil. The three frames ship with the
   package (``data/``, 3 MB, written by :func:`ship_bead_frames`), so the sample opens in about
   0.5 s; were they stale, it would be simulated (about a minute on two cores) and cached.
-- ``moving_sample_series``: a swimming cell-like sample in water (``phantoms.moving_sample``),
+- ``moving_sample_series``: a swimming cell-like sample in water (``moving.moving_sample``),
   20 frames. Reduced cost: the condenser disk is sampled every 4 lattice units
   (``Source(step=4)``, 221 source points instead of 821; about 4 s per frame instead of 18 s,
   and at most 3 % of the peak intensity different from the full sampling). The series is a lazy
@@ -234,8 +234,8 @@ def series_frame(i: int, n_frames: int = SERIES_FRAMES) -> np.ndarray:
     -------
     ndarray, uint16, (H, W)
     """
+    from napari_ssdpc.simulation.moving import moving_sample
     from napari_ssdpc.simulation.multislice import Source
-    from napari_ssdpc.simulation.phantoms import moving_sample
     from napari_ssdpc.simulation.simulate import simulate
 
     optics = series_optics()

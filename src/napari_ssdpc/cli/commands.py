@@ -122,14 +122,14 @@ def make_phantom(name, optics, *, n_frames=20):
     tuple
         (phantom or list of phantoms, Optics)
     """
-    from napari_ssdpc.simulation import phantoms
+    from napari_ssdpc.simulation import moving, phantoms
 
     makers = {
         "bead": phantoms.pmma_bead,
         "two-beads": phantoms.two_beads,
         "cell": phantoms.cell,
         "bars": phantoms.bar_target,
-        "moving": lambda: phantoms.moving_sample(n_frames),
+        "moving": lambda: moving.moving_sample(n_frames),
     }
     if name not in makers:
         raise SsdpcError(f"unknown phantom '{name}'; choose one of {', '.join(PHANTOMS)}")

@@ -94,10 +94,10 @@ def _load():
 
 def _simulate(name, condenser_na, frames, cache_dir):
     from napari_ssdpc.settings.optics import Optics
-    from napari_ssdpc.simulation import phantoms
+    from napari_ssdpc.simulation import moving, phantoms
     from napari_ssdpc.validation.cases import simulate_case
 
-    phantom = phantoms.pmma_bead() if frames is None else phantoms.moving_sample(frames)
+    phantom = phantoms.pmma_bead() if frames is None else moving.moving_sample(frames)
     return simulate_case(name, phantom, Optics.paper().replace(condenser_na=condenser_na), cache_dir=cache_dir)
 
 

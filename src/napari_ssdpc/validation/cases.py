@@ -22,6 +22,7 @@ from napari_ssdpc.reconstruction.reconstructor import Reconstructor
 from napari_ssdpc.settings.config import RunConfig
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.settings.reconstruction import DEFAULT_Z_UM
+from napari_ssdpc.simulation import moving
 from napari_ssdpc.simulation import phantoms as ph
 from napari_ssdpc.simulation.multislice import Source
 from napari_ssdpc.simulation.sample_free import flat_frame, white_frame
@@ -419,6 +420,6 @@ CASES = {
     "two-beads": ph.two_beads,
     "cell": ph.cell,
     "weak-bead": ph.weak_bead,
-    "moving-10": lambda: ph.moving_sample(20)[10],
+    "moving-10": lambda: moving.moving_sample(20)[10],
     "bars": ph.bar_target,
 }

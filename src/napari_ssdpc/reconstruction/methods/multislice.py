@@ -231,6 +231,7 @@ class MultisliceMethod(PhaseMethod):
             return f, g
 
         n_data = max(float(weight.sum()), 1.0)
+        contrast = float(np.sum(weight * (measured - 1.0) ** 2)) / n_data  # the views' mean squared contrast
         # the discrepancy principle: a fit closer than the noise (and the model's own error) fits noise
         enough = 0.5 * n_data * noise**2 * ms.stop_residual_over_noise if noise > 0 else 0.0
 
@@ -246,6 +247,7 @@ class MultisliceMethod(PhaseMethod):
                 "multislice_objective_final": history["objective"][-1],
                 "multislice_residual_rms": math.sqrt(float(np.sum(res * res)) / n_data),
                 "multislice_residual_over_noise": float(np.sum(res * res)) / n_data / noise**2 if noise > 0 else None,
+                "multislice_contrast_over_noise": contrast / noise**2 if noise > 0 else None,
                 "multislice_roi_px": [rows.start, rows.stop, cols.start, cols.stop],
                 "multislice_z_um": [float(x_model.z_um[0]), float(x_model.z_um[-1])],
                 "multislice_source_points": [x_model.n_sources, x_model.n_subsources],
