@@ -71,7 +71,8 @@ def test_the_widget_shows_the_short_design_table(make_napari_viewer):
 @pytest.mark.parametrize("dock_first", [True, False], ids=["dock, then sample", "sample, then dock"])
 def test_the_sample_brings_its_own_optics(make_napari_viewer, monkeypatch, tmp_path, dock_first):
     """The bead sample is simulated at condenser NA 0.3 (the paper optics have 0.1) on a 1024 px
-    region: opening it makes those the optics, in either order, and the tabs show them."""
+    region: opening it makes those the optics, in either order, and the tabs show them; the z range,
+    method and α set before stay."""
     from napari_ssdpc._napari import notify
     from napari_ssdpc._napari.sample_data import bead_frames
 
@@ -82,9 +83,16 @@ def test_the_sample_brings_its_own_optics(make_napari_viewer, monkeypatch, tmp_p
     if dock_first:
         _, dock = viewer.window.add_plugin_dock_widget("napari-ssdpc", "ssDPC")
         assert dock.session.optics == Optics.paper()
+        op, rc = dock.tabs["Method"], dock.tabs["Reconstruct"]
+        op.z_min.value, op.z_max.value, op.dz.value, op.method.value = -12.0, 18.0, 3.0, "wotf"
+        rc.alpha.value = 0.05
     viewer.open_sample("napari-ssdpc", "pmma_bead")
     if not dock_first:
         _, dock = viewer.window.add_plugin_dock_widget("napari-ssdpc", "ssDPC")
+    else:  # the user's settings stay
+        assert (op.z_min.value, op.z_max.value, op.dz.value, op.method.value, rc.alpha.value) == (
+            -12.0, 18.0, 3.0, "wotf", 0.05
+        )  # fmt: skip
     optics = bead_frames()[3]
     assert Optics.paper().condenser_na == 0.1 and optics.condenser_na == 0.3
     assert dock.session.optics == optics

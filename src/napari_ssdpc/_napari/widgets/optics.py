@@ -115,6 +115,7 @@ class OpticsWidget(StepWidget):
         self.paper_button.changed.connect(lambda *_: self.set_optics(Optics.paper()))
         self.layer_button.changed.connect(self._from_layer)
         self.session.optics_loaded.connect(self._show)
+        self.session.optics_adopted.connect(self._show)
 
     # ----------------------------------------------------------------------------
     def _show(self, optics: Optics):

@@ -36,6 +36,7 @@ class Session:
 
     optics_changed = Signal(object)  # any edit of the optics
     optics_loaded = Signal(object)  # a new optics file/preset: widgets reset their defaults
+    optics_adopted = Signal(object)  # the optics a frame brought: shown, the other settings kept
     settings_loaded = Signal(object)  # a settings file: widgets show its ReconstructionSettings
     operators_built = Signal(object)
 
@@ -58,7 +59,7 @@ class Session:
         """
         setattr(self, role, weakref.ref(widget))
 
-    def set_optics(self, optics: Optics, loaded: bool = False):
+    def set_optics(self, optics: Optics, loaded: bool = False, adopted: bool = False):
         """Make ``optics`` the session's.
 
         Parameters
@@ -66,11 +67,16 @@ class Session:
         optics : Optics
         loaded : bool
             A new file or preset (the widgets reset their defaults), not an edit.
+        adopted : bool
+            The optics a frame brought (the sample data): the Optics tab shows them, the z range,
+            method and α the user set stay.
         """
         self.optics = optics
         self.optics_changed.emit(optics)
         if loaded:
             self.optics_loaded.emit(optics)
+        elif adopted:
+            self.optics_adopted.emit(optics)
 
     def _widgets(self):
         refs = (self.operators_widget, self.reconstruct_widget)
@@ -248,9 +254,9 @@ def adopt_frame_optics(viewer, session: Session) -> None:
     """Raw frames that carry their optics (the sample data) make them the session's when they arrive.
 
     The sample's frames are only right with the optics they were simulated with (the bead: condenser
-    NA 0.3; the moving sample: water): the Optics tab shows them and the other tabs reset their
-    defaults, as after **Load YAML**. Layers already in the viewer count too (the sample opened
-    before the dock). Nothing happens when the optics are already the session's.
+    NA 0.3; the moving sample: water): the Optics tab shows them; the z range, method and α the
+    user set stay (as with "From selected layer"). Layers already in the viewer count too (the
+    sample opened before the dock). Nothing happens when the optics are already the session's.
 
     Parameters
     ----------
@@ -269,7 +275,7 @@ def adopt_frame_optics(viewer, session: Session) -> None:
             notify.warning(f"{e}; the optics stay as they were")
             return
         if optics != session.optics:
-            session.set_optics(optics, loaded=True)
+            session.set_optics(optics, adopted=True)
             notify.info(
                 f"optics of '{layer.name}' adopted: {optics.name} (condenser NA {optics.condenser_na:g}, "
                 f"medium n {optics.medium_index:g})"
