@@ -153,7 +153,7 @@ class MultisliceSettings(SettingsModel):
     runtime: ClassVar[frozenset[str]] = frozenset(
         {"iterations", "source_spacing_na", "source_subsamples", "substeps", "refine", "roi_margin_um", "z_margin_um"}
         | {"roi_um"}
-        | {"tv_weight", "stop_residual_over_noise", "unknowns"}
+        | {"tv_weight", "stop_residual_over_noise", "model_error", "unknowns", "depth_search_um"}
     )
 
     iterations: int = bounded(60, 1, 500, "most gradient iterations of the refinement")
@@ -180,6 +180,16 @@ class MultisliceSettings(SettingsModel):
     )
     stop_residual_over_noise: float = bounded(
         4.0, 0.0, 1e6, "stop when the mean squared residual falls to this many times the noise variance"
+    )
+    depth_search_um: float = bounded(
+        0.0, 0.0, 30.0, "each object's start is tried this far along z (whole planes) before the fit, µm; 0: not"
+    )
+    model_error: float = bounded(
+        0.0,
+        0.0,
+        0.5,
+        "rms error of the model's views relative to their contrast: the stop is raised by its share "
+        "(model_error² x the views' mean squared contrast)",
     )
 
     @model_validator(mode="after")

@@ -16,6 +16,22 @@ def _plt():
     return plt
 
 
+def _truth_and_centre(result, sphere, medium_index):
+    """The true RI on the result's grid, and the index (z, y, x) of the voxel at the bead's centre."""
+    from napari_ssdpc.validation.cases import _index, truth_volume
+
+    x, y, z = sphere.center_um
+    return medium_index + truth_volume(sphere, result, medium_index), _index(result, (z, y, x))
+
+
+def _save(plt, fig, path, title: str):
+    if title:
+        fig.suptitle(title)
+    fig.savefig(path, dpi=90, metadata={"Software": SOFTWARE})
+    plt.close(fig)
+    return path
+
+
 def bead_figure(result, sphere, medium_index, path, title=""):
     """xy, xz and yz slices of the RI through the bead centre, plus lateral and axial RI profiles
     against the ground truth.
@@ -36,13 +52,9 @@ def bead_figure(result, sphere, medium_index, path, title=""):
     str or Path
         ``path``.
     """
-    from napari_ssdpc.validation.cases import _index, truth_volume
-
     plt = _plt()
     ri = result.ri
-    truth = medium_index + truth_volume(sphere, result, medium_index)
-    x, y, z = sphere.center_um
-    iz, iy, ix = _index(result, (z, y, x))
+    truth, (iz, iy, ix) = _truth_and_centre(result, sphere, medium_index)
     lim = max(float(np.abs(ri - medium_index).max()), 1e-6)
     kw = dict(cmap="RdBu_r", vmin=medium_index - lim, vmax=medium_index + lim)
     tv = result.convergence.get("tv") if isinstance(result.convergence, dict) else None
@@ -81,11 +93,7 @@ def bead_figure(result, sphere, medium_index, path, title=""):
         ax[5].set_xlabel("ADMM iteration")
         ax[5].set_title(f"TV solve ({result.settings.get('tv_sign', '')})", fontsize=8)
         ax[5].legend(fontsize=8)
-    if title:
-        fig.suptitle(title)
-    fig.savefig(path, dpi=90, metadata={"Software": SOFTWARE})
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path, title)
 
 
 def comparison_figure(results: dict, sphere, medium_index, path, title=""):
@@ -96,26 +104,16 @@ def comparison_figure(results: dict, sphere, medium_index, path, title=""):
     ----------
     results : dict
         {label: Result}, one row each, on the same grid.
-    sphere : Sphere
-        The truth.
-    medium_index : float
-    path : str or Path
-        The PNG.
-    title : str
-        Figure title; empty: none.
+    sphere, medium_index, path, title
+        As for :func:`bead_figure`.
 
     Returns
     -------
     str or Path
         ``path``.
     """
-    from napari_ssdpc.validation.cases import _index, truth_volume
-
     plt = _plt()
-    first = next(iter(results.values()))
-    truth = medium_index + truth_volume(sphere, first, medium_index)
-    x, y, z = sphere.center_um
-    iz, iy, ix = _index(first, (z, y, x))
+    truth, (iz, iy, ix) = _truth_and_centre(next(iter(results.values())), sphere, medium_index)
     lim = max(max(float(np.abs(r.ri - medium_index).max()) for r in results.values()), 1e-6)
     kw = dict(cmap="RdBu_r", vmin=medium_index - lim, vmax=medium_index + lim, aspect="auto")
     rows = len(results)
@@ -131,8 +129,4 @@ def comparison_figure(results: dict, sphere, medium_index, path, title=""):
         row[2].plot(r.x_um, truth[iz, iy], "k--", label="truth")
         row[2].set(title=f"lateral profile at z = {r.z_um[iz]:g} µm", xlabel="x (µm)")
         row[2].legend(fontsize=8)
-    if title:
-        fig.suptitle(title)
-    fig.savefig(path, dpi=90, metadata={"Software": SOFTWARE})
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path, title)
