@@ -13,6 +13,7 @@ import pytest
 
 from napari_ssdpc.simulation import phantoms as ph
 from napari_ssdpc.validation import cases as val
+from napari_ssdpc.validation.mass import mass_and_tail
 
 pytestmark = pytest.mark.slow
 
@@ -141,20 +142,6 @@ def test_bar_target_finest_element_resolved(cache):
     assert val.bar_metrics(res, case.phantom)["contrast"][4.38] > 0.10
 
 
-def _bead_sums(res, sphere, medium_index):
-    """Σ Δn dV over a disk 4 µm wider in radius than the bead (all planes) over the truth, and
-    Σ|Δn| farther than 8 µm beyond the bead's surface along z over Σ|Δn| within it."""
-    dn = res.delta_n.astype(float)
-    yy, xx = np.meshgrid(res.y_um, res.x_um, indexing="ij")
-    cx, cy, cz = sphere.center_um
-    disk = np.hypot(xx - cx, yy - cy) <= sphere.diameter_um / 2 + 4.0
-    near = np.abs(res.z_um - cz) <= sphere.diameter_um / 2 + 8.0
-    truth = (np.real(sphere.n) - medium_index) * np.pi / 6 * sphere.diameter_um**3
-    integrated = dn[:, disk].sum() * np.prod(res.voxel_um) / truth
-    tail = np.abs(dn[~near][:, disk]).sum() / np.abs(dn[near][:, disk]).sum()
-    return integrated, tail
-
-
 @pytest.fixture(scope="module")
 def silica(cache):
     """A silica-like 5 µm bead in water (Δn +0.13, 7.9 rad through its centre) at condenser NA 0.25,
@@ -167,7 +154,8 @@ def silica(cache):
             warnings.simplefilter("always")
             res, _, _ = val.reconstruct_case(case, z=(-30, 30), method=method)
         said = [str(w.message) for w in caught]
-        out[method] = (res, *_bead_sums(res, sphere, 1.333), val.bead_metrics(res, sphere, 1.333), said)
+        m = mass_and_tail(res, sphere, 1.333)
+        out[method] = (res, m["integrated"], m["tail"], val.bead_metrics(res, sphere, 1.333), said)
     return out
 
 

@@ -153,7 +153,7 @@ class MultisliceSettings(SettingsModel):
     runtime: ClassVar[frozenset[str]] = frozenset(
         {"iterations", "source_spacing_na", "source_subsamples", "substeps", "refine", "roi_margin_um", "z_margin_um"}
         | {"roi_um"}
-        | {"tv_weight", "stop_residual_over_noise", "model_error", "unknowns", "depth_search_um"}
+        | {"tv_weight", "stop_residual_over_noise", "model_error", "unknowns"}
     )
 
     iterations: int = bounded(60, 1, 500, "most gradient iterations of the refinement")
@@ -176,16 +176,17 @@ class MultisliceSettings(SettingsModel):
     )
     tv_weight: float = bounded(0.0, 0.0, 1e3, "total-variation weight, relative to the views' noise; 0: none")
     unknowns: Literal["views", "model"] = Field(
-        "views", description="grid of the fitted Δn: the views' pixels, or the model's k x k finer samples"
+        "model", description="grid of the fitted Δn: the model's k x k finer samples, or the views' pixels"
     )
     stop_residual_over_noise: float = bounded(
-        4.0, 0.0, 1e6, "stop when the mean squared residual falls to this many times the noise variance"
-    )
-    depth_search_um: float = bounded(
-        0.0, 0.0, 30.0, "each object's start is tried this far along z (whole planes) before the fit, µm; 0: not"
+        3.0,
+        0.0,
+        1e6,
+        "stop when the mean squared residual falls to this many times the noise variance (plus the "
+        "model's share, model_error)",
     )
     model_error: float = bounded(
-        0.0,
+        0.04,
         0.0,
         0.5,
         "rms error of the model's views relative to their contrast: the stop is raised by its share "

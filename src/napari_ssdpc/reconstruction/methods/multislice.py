@@ -135,60 +135,6 @@ def object_labels(dn, level: float = OBJECT_LEVEL):
     return labels, labels[iy, ix]
 
 
-def best_depths(x, nearest, misfit, max_shift: int):
-    """Move each object of ``x`` along z to where the model explains the views best.
-
-    The first-order start of a strong object sits up to a few µm off its depth, and a gradient
-    fit moves mass along z only slowly (the views are least sensitive along the missing cone). So
-    each object (the pixels nearest to it) is tried at whole-plane shifts of up to ``max_shift``,
-    one object after the other, and kept where the misfit is smallest.
-
-    Parameters
-    ----------
-    x : ndarray, (Z, ny, nx)
-        The start, Δn.
-    nearest : ndarray, int, (ny, nx)
-        Object label of every pixel (:func:`object_labels`).
-    misfit : callable
-        ``misfit(x)``: the objective at ``x``.
-    max_shift : int
-        Largest shift, planes.
-
-    Returns
-    -------
-    x : ndarray, (Z, ny, nx)
-        The start with each object at its best depth.
-    shifts : list of int
-        The shift of each object, planes (+: farther from the objective).
-    """
-    shifts = []
-    for c in range(1, int(nearest.max()) + 1):
-        mine = (nearest == c)[None]
-        best, best_f = 0, misfit(x)
-        for k in range(-max_shift, max_shift + 1):
-            if k == 0:
-                continue
-            moved = np.where(mine, _shift_z(x, k), x)
-            f = misfit(moved)
-            if f < best_f:
-                best, best_f = k, f
-        x = np.where(mine, _shift_z(x, best), x)
-        shifts.append(best)
-    return x, shifts
-
-
-def _shift_z(x, k: int):
-    """``x`` moved by ``k`` planes along z (+: to larger z), zeros brought in."""
-    out = np.zeros_like(x)
-    if k > 0:
-        out[k:] = x[:-k]
-    elif k < 0:
-        out[:k] = x[-k:]
-    else:
-        out[:] = x
-    return out
-
-
 def _roi_of(box_um, x_um, y_um):
     x0, x1, y0, y1 = box_um
     if x1 < x_um[0] or x0 > x_um[-1] or y1 < y_um[0] or y0 > y_um[-1]:
@@ -304,7 +250,6 @@ class MultisliceMethod(PhaseMethod):
             return f, g
 
         n_data = max(float(weight.sum()), 1.0)
-        shifts: list = []  # of each object's start along z, planes
         contrast = float(np.sum(weight * (measured - 1.0) ** 2)) / n_data  # the views' mean squared contrast
         # the discrepancy principle: a fit closer than the noise and the model's own error fits them
         # (the model's error is a share of the views' contrast: larger for a stronger object)
@@ -325,7 +270,6 @@ class MultisliceMethod(PhaseMethod):
                 "multislice_residual_over_noise": float(np.sum(res * res)) / n_data / noise**2 if noise > 0 else None,
                 "multislice_contrast_over_noise": contrast / noise**2 if noise > 0 else None,
                 "multislice_stop_over_noise": stop,
-                "multislice_depth_shifts_um": [float(k * dz) for k in shifts],
                 "multislice_roi_px": [rows.start, rows.stop, cols.start, cols.stop],
                 "multislice_z_um": [float(x_model.z_um[0]), float(x_model.z_um[-1])],
                 "multislice_source_points": [x_model.n_sources, x_model.n_subsources],
@@ -342,12 +286,6 @@ class MultisliceMethod(PhaseMethod):
             return Solution(start.phase, kept, {**start.history, "multislice": {"objective": [f0]}}, state=start.state)
         model = make(planes)
         x = project(np.where(window[planes], dn[planes, rows, cols], 0.0))  # the objects, not their tails
-        if ms.depth_search_um > 0:
-            _, nearest = object_labels(dn[:, rows, cols])
-            x, shifts = best_depths(
-                x, nearest, lambda a: objective(a, with_grad=False)[0], int(round(ms.depth_search_um / dz))
-            )
-            x = project(x)
         if ms.unknowns == "model":  # sub-pixel edges: each view pixel's k x k model samples are free
             same = lambda a: a
             grid.update(up=same, down=same, inside=fine(inside), voxel=(dz, px / k, px / k))
