@@ -151,8 +151,9 @@ def build_parser():
     s.add_argument("--seed", type=int, default=0, help="random seed of the camera noise (>= 0)")
     s.add_argument(
         "--refine",
-        action="store_true",
-        help="also refine with --method multislice (a few minutes more): ri_multislice.ome.tif, refined.png",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="also refine with --method multislice, about 3 minutes: ri_multislice.ome.tif, refined.png (default: yes)",
     )
     s.add_argument(
         "--overwrite", action="store_true", help="replace files in the folder that napari-ssdpc did not write"

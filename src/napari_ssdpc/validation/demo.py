@@ -1,5 +1,6 @@
 """``ssdpc demo``: simulate the paper's PMMA bead, calibrate on the simulated white frame,
-flat-field with the simulated flat frame, reconstruct, and save the RI volume and a figure."""
+flat-field with the simulated flat frame, reconstruct, refine with the multislice model, and save
+the RI volumes and figures."""
 
 from __future__ import annotations
 
@@ -29,7 +30,7 @@ REFINE_FILES = ("ri_multislice.ome.tif", "refined.png")
 
 
 def run_demo(
-    out: Path, optics: Optics | None = None, seed: int = 0, z=DEFAULT_Z_UM, dz: float = 1.0, refine: bool = False
+    out: Path, optics: Optics | None = None, seed: int = 0, z=DEFAULT_Z_UM, dz: float = 1.0, refine: bool = True
 ) -> dict:
     """``ssdpc demo``: simulate the PMMA bead, calibrate, reconstruct, write and summarise.
 
@@ -46,7 +47,7 @@ def run_demo(
     dz : float
         Plane spacing, µm.
     refine : bool
-        Also refine the answer with the multislice model (``method: multislice``, a few minutes
+        Also refine the answer with the multislice model (``method: multislice``, about 3 minutes
         more): ``ri_multislice.ome.tif`` and ``refined.png``, both methods side by side.
 
     Returns
