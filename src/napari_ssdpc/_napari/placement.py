@@ -14,7 +14,15 @@ import weakref
 
 from napari_ssdpc.settings.optics import Optics
 
-__all__ = ["follow_optics", "follow_results", "frame_transform", "place_frames", "scale_bar", "show_first_result"]
+__all__ = [
+    "fit_view",
+    "follow_optics",
+    "follow_results",
+    "frame_transform",
+    "place_frames",
+    "scale_bar",
+    "show_first_result",
+]
 
 
 def frame_transform(optics: Optics, ndim: int) -> dict:
@@ -139,8 +147,24 @@ def show_first_result(viewer, layer) -> None:
             lyr.name == source or info.get("kind") in ("raw", "calibration") or info.get("placed")
         ):
             lyr.visible = False
-    viewer.fit_to_view(layers=[layer])
+    fit_view(viewer, layer)
     scale_bar(viewer).visible = True  # every shown layer is in µm: the bar reads µm
+
+
+def fit_view(viewer, layer) -> None:
+    """Fit the view to ``layer``; to every layer where napari cannot fit one alone (a (z, y, x)
+    volume beside a (t, z, y, x) series: napari 0.9 indexes the volume's extent by the viewer's
+    axes and fails).
+
+    Parameters
+    ----------
+    viewer : napari.Viewer
+    layer : napari layer
+    """
+    if layer.ndim == viewer.dims.ndim:
+        viewer.fit_to_view(layers=[layer])
+    else:
+        viewer.reset_view()
 
 
 def follow_results(viewer=None) -> None:

@@ -16,6 +16,7 @@ import numpy as np
 from magicgui.widgets import ComboBox, FileEdit, SpinBox
 
 from napari_ssdpc._napari import notify
+from napari_ssdpc._napari.placement import fit_view
 from napari_ssdpc._napari.widgets.choices import LayerChoice, result_layer_choices
 from napari_ssdpc._napari.widgets.common import StepWidget, follow_layers, run_buttons
 from napari_ssdpc._napari.widgets.jobs import JobRunner
@@ -103,7 +104,7 @@ def plan_movie(viewer, layer, kind: str = "turn in 3D", seconds: float = 4.0, fp
 
     for other in viewer.layers:
         other.visible = other is layer
-    viewer.fit_to_view(layers=[layer])
+    fit_view(viewer, layer)
     animation = Animation(viewer)
     if kind == "time series":
         if layer.ndim < 4:
