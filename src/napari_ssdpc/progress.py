@@ -24,8 +24,9 @@ def tqdm_callback(desc: str, unit: str = "step", disable: bool = False):
     Yields
     ------
     callable
-        ``update(done, total, *extra)``: sets the bar to ``done`` of ``total``. On a terminal the
-        bar redraws every 0.5 s; in a log file every 10 s.
+        ``update(done, total, label='')``: sets the bar to ``done`` of ``total``; a new ``label``
+        (a stage of the work) is shown beside ``desc`` and restarts the bar. On a terminal the bar
+        redraws every 0.5 s; in a log file every 10 s.
     """
     tty = sys.stderr.isatty()
     # in a log file, a line every 10 s is enough
@@ -39,8 +40,14 @@ def tqdm_callback(desc: str, unit: str = "step", disable: bool = False):
         disable=disable,
     )
 
-    def update(done, total, *_):
-        if bar.total != total:
+    stage = [""]
+
+    def update(done, total, label="", *_):
+        if label and label != stage[0]:  # a new stage of the work (e.g. "TV", then "multislice")
+            stage[0] = label
+            bar.set_description(f"{desc} ({label})", refresh=False)
+            bar.reset(total=total)
+        elif bar.total != total:
             bar.reset(total=total)
         bar.update(done - bar.n)
 
