@@ -40,11 +40,12 @@ def tqdm_callback(desc: str, unit: str = "step", disable: bool = False):
         disable=disable,
     )
 
-    stage = [""]
+    stage = ""
 
     def update(done, total, label="", *_):
-        if label and label != stage[0]:  # a new stage of the work (e.g. "TV", then "multislice")
-            stage[0] = label
+        nonlocal stage
+        if label and label != stage:  # a new stage of the work (e.g. "TV", then "multislice")
+            stage = label
             bar.set_description(f"{desc} ({label})", refresh=False)
             bar.reset(total=total)
         elif bar.total != total:

@@ -92,7 +92,7 @@ def process_frame(rec, source: FrameSource, t: int, sink: Sink, *, warm=None, pr
 
 
 #: A Dask scheduler's address: ``protocol://host:port`` or ``host:port``.
-_SCHEDULER = re.compile(r"(?:[a-z][a-z0-9+]*://)?[^\s/:]+:\d{1,5}|[a-z][a-z0-9+]*://[^\s]+")
+_SCHEDULER = re.compile(r"[a-z][a-z0-9+]*://\S+|[^\s/:]+:\d{1,5}")
 
 
 class Pipeline:
