@@ -35,24 +35,29 @@ class Rewriter(FakeRec):
     """Reconstructs like FakeRec and, while frame ``at`` is being reconstructed, copies another
     recording over the input file (``cp other.tif series.tif``)."""
 
-    def __init__(self, src, other, at):
-        self.src, self.other, self.at, self.n = src, other, at, 0
+    def __init__(self, src, other, at, keep_time=False):
+        self.src, self.other, self.at, self.n, self.keep_time = src, other, at, 0, keep_time
 
     def reconstruct(self, frame, **kw):
         if self.n == self.at:
+            st = self.src.stat()
             self.src.write_bytes(self.other.read_bytes())
+            if self.keep_time:  # cp -p of a file of the same size: size and modification time as before
+                os.utime(self.src, ns=(st.st_atime_ns, st.st_mtime_ns))
         self.n += 1
         return super().reconstruct(frame, **kw)
 
 
+@pytest.mark.parametrize("keep_time", [False, True], ids=["cp", "cp-p"])
 @pytest.mark.parametrize("at", [0, 1, 2])
-def test_an_input_rewritten_during_the_run_stops_it(job, tmp_path, at):
+def test_an_input_rewritten_during_the_run_stops_it(job, tmp_path, at, keep_time):
     recipe, frames = job
     src, other, out = tmp_path / "series.tif", tmp_path / "other.tif", tmp_path / "s.zarr"
     tifffile.imwrite(src, frames, photometric="minisblack")
     tifffile.imwrite(other, frames[::-1] + 7, photometric="minisblack")
+    assert other.stat().st_size == src.stat().st_size
     with pytest.raises(SsdpcError, match=f"series.tif changed during the run .* frame {at} was not marked done") as e:
-        _run(recipe, StoredFrames(src), out, Rewriter(src, other, at))
+        _run(recipe, StoredFrames(src), out, Rewriter(src, other, at, keep_time))
     assert "\n" not in str(e.value)
     assert list(done_frames(out)) == list(range(at))  # only frames read from the first recording
     ref = tmp_path / "ref.zarr"  # the frames kept are the first recording's

@@ -35,11 +35,17 @@ _NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|nan)$
 
 
 class _Parser(argparse.ArgumentParser):
-    """An ArgumentParser that reads -1e3 as a number, so that ``--z -1e3 1e3`` parses."""
+    """An ArgumentParser that reads -1e3 as a number, so that ``--z -1e3 1e3`` parses, and reports a
+    wrong command line in one line that names its help (argparse prints its usage line first)."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = _NEGATIVE_NUMBER
+
+    def error(self, message: str):
+        """Exit with status 2 and one line: the fault and where the options are listed."""
+        line = " ".join(message.split())
+        self.exit(2, f"{self.prog}: error: {line}; see `{self.prog} --help`\n")
 
 
 # ------------------------------------------------------------------------- parser

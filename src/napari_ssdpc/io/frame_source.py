@@ -77,10 +77,10 @@ class StoredFrames:
             }
         files = sorted(p for p in self.path.rglob("*") if p.is_file()) if self.path.is_dir() else [self.path]
         try:
-            size = mtime = 0
+            size = mtime = ctime = 0
             for path in files:  # a store's files in a fixed order, names and contents
                 st = path.stat()
-                size, mtime = size + st.st_size, max(mtime, st.st_mtime_ns)
+                size, mtime, ctime = size + st.st_size, max(mtime, st.st_mtime_ns), max(ctime, st.st_ctime_ns)
                 h.update(str(path.relative_to(self.path) if path != self.path else "").encode())
                 with open(path, "rb") as f:
                     for block in iter(lambda: f.read(1 << 22), b""):
@@ -91,6 +91,7 @@ class StoredFrames:
             "path": self.name,
             "size": int(size),
             "mtime_ns": int(mtime),
+            "ctime_ns": int(ctime),  # moves on any rewrite, also one that keeps the size and time (cp -p)
             "frames": len(self),
             "sha256": h.hexdigest(),
         }

@@ -215,47 +215,56 @@ def write_frame(out, t: int, images: dict) -> float:
     return time.perf_counter() - t0
 
 
-def _size_and_mtime(path: Path) -> tuple[int, int]:
-    """Bytes and latest modification (ns) of a file, or of all the files of a folder (a store)."""
+def _file_times(path: Path) -> tuple[int, int, int]:
+    """Bytes, latest modification and latest status change (ns) of a file, or of all the files of a
+    folder (a store)."""
     files = [p for p in path.rglob("*") if p.is_file()] if path.is_dir() else [path]
-    size = mtime = 0
+    size = mtime = ctime = 0
     for p in files:
         st = p.stat()
-        size, mtime = size + st.st_size, max(mtime, st.st_mtime_ns)
-    return size, mtime
+        size, mtime, ctime = size + st.st_size, max(mtime, st.st_mtime_ns), max(ctime, st.st_ctime_ns)
+    return size, mtime, ctime
 
 
 def check_input_unchanged(stamp, t: int) -> None:
     """Refuse to mark frame ``t`` done when the store's input file changed since the run began.
 
-    Cheap: the file's size and modification time against the stamp's (its SHA-256 is taken once,
-    when the store is opened). A file rewritten in place during a run (``cp other.tif series.tif``)
-    would otherwise give a store whose later frames come from another recording than its stamp
-    names. Inputs that are not files (arrays) are not checked.
+    Cheap: the file's size, modification time and status-change time against the stamp's (its
+    SHA-256 is taken once, when the store is opened). A file rewritten in place during a run
+    (``cp other.tif series.tif``) would otherwise give a store whose later frames come from another
+    recording than its stamp names; the status-change time, which no copy can set, also catches a
+    rewrite that keeps the size and the modification time (``cp -p`` of a file of the same size).
+    Inputs that are not files (arrays) are not checked.
 
     Parameters
     ----------
     stamp : dict or None
-        The store's stamp (:data:`STAMP`); its ``input`` holds path, size and mtime_ns.
+        The store's stamp (:data:`STAMP`); its ``input`` holds path, size, mtime_ns and ctime_ns
+        (stores written before ctime_ns was stamped are checked on size and mtime_ns).
     t : int
         The frame about to be marked done.
 
     Raises
     ------
     SsdpcError
-        The input is gone, or its size or modification time changed.
+        The input is gone, or its size, modification or status-change time changed.
     """
     ident = stamp.get("input") if isinstance(stamp, dict) else None
     if not isinstance(ident, dict) or ident.get("size") is None or not ident.get("mtime_ns"):
         return
     path = Path(str(ident.get("path")))
     try:
-        size, mtime = _size_and_mtime(path)
+        size, mtime, ctime = _file_times(path)
     except OSError:
-        size, mtime = -1, 0
-    if (size, mtime) == (ident["size"], ident["mtime_ns"]):
+        size, mtime, ctime = -1, 0, 0
+    if (size, mtime) == (ident["size"], ident["mtime_ns"]) and ctime == ident.get("ctime_ns", ctime):
         return
-    now = "is gone" if size < 0 else f"is now {size} bytes, modified {_when(mtime)}"
+    if size < 0:
+        now = "is gone"
+    elif (size, mtime) == (ident["size"], ident["mtime_ns"]):
+        now = f"was rewritten at {_when(ctime)} with the same size and time"
+    else:
+        now = f"is now {size} bytes, modified {_when(mtime)}"
     raise SsdpcError(
         f"{path} changed during the run (it was {ident['size']} bytes, modified {_when(ident['mtime_ns'])}; it {now}): "
         f"frame {t} was not marked done, the frames before it are of the recording the store names; restore the "
