@@ -285,7 +285,8 @@ def cmd_reconstruct(args):
     if follow:
         source = followed(args.raw, args.idle)
     else:
-        source = StoredFrames(args.raw if is_zarr else read_frame(args.raw))  # a series streams, frame by frame
+        # a series streams, frame by frame
+        source = StoredFrames(args.raw if is_zarr else read_frame(args.raw), label=Path(args.raw).name)
     flat = read_frame(args.flat, allow_series=False, name="flat frame") if args.flat else None
     meta = {
         "software": SOFTWARE,

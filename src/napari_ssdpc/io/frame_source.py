@@ -20,9 +20,18 @@ class StoredFrames:
     in-memory or lazy (dask) array (a dask array is named by its graph: frames simulated or read
     on demand are not read to hash them).
 
-    Pickles as its path (Dask workers reopen the file themselves)."""
+    Pickles as its path (Dask workers reopen the file themselves).
 
-    def __init__(self, source):
+    Parameters
+    ----------
+    source : str, Path or array, (t, y, x) or (y, x)
+        The file, or the frames.
+    label : str, optional
+        What messages call frames given as an array (the file they were read from); default 'array'.
+    """
+
+    def __init__(self, source, label: str | None = None):
+        self._label = label
         in_memory = not isinstance(source, (str, Path))  # a NumPy array, or a lazy (dask) one
         if in_memory and not (hasattr(source, "ndim") and hasattr(source, "shape") and hasattr(source, "dtype")):
             raise SsdpcError(
@@ -41,8 +50,8 @@ class StoredFrames:
 
     @property
     def name(self) -> str:
-        """The file's absolute path, or 'array' for frames in memory."""
-        return "array" if self.path is None else str(self.path.resolve())
+        """The file's absolute path, or the label of frames in memory ('array' without one)."""
+        return (self._label or "array") if self.path is None else str(self.path.resolve())
 
     @property
     def fingerprint(self) -> str:

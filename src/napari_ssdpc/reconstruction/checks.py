@@ -252,9 +252,9 @@ def check_saturated(raw, name: str) -> None:
         raise SsdpcError(f"{name}: {100 * frac:.0f}% of the pixels are saturated; shorten the exposure or dim the lamp")
 
 
-def check_flat(levels, noise: float, optics, name: str = "flat frame", lenslets=None) -> None:
+def check_flat(levels, noise: float, optics, name: str = "flat frame", lenslets=None) -> float | None:
     """Refuse a flat frame without light, recorded at another condenser NA, or with the condenser
-    open (white).
+    open (white); report one a few per cent off the optics' condenser NA.
 
     Parameters
     ----------
@@ -268,6 +268,11 @@ def check_flat(levels, noise: float, optics, name: str = "flat frame", lenslets=
         For the message.
     lenslets : list of Lenslet, optional
         All the calibration's lenslets: the condenser NA the flat looks lit at is checked too.
+
+    Returns
+    -------
+    float or None
+        The condenser NA the flat's lenslets look lit at (None without ``lenslets``).
     """
     top = float(np.nanmax(levels))
     if not top > 5 * noise:
@@ -276,19 +281,33 @@ def check_flat(levels, noise: float, optics, name: str = "flat frame", lenslets=
             "record the flat with the lamp on, the condenser at the raw frames' NA and no sample"
         )
     fix = "record the flat at the condenser NA of the raw frames"
-    _condenser(levels, lenslets, optics, name, fix + " (or set condenser_na to the NA of both)")
-    _white(levels, top, optics, name, fix)
+    return _lighting(levels, top, lenslets, optics, name, fix + " (or set condenser_na to the NA of both)", fix, True)
 
 
-def _condenser(levels, lenslets, optics, name: str, fix: str) -> None:
-    """The condenser-NA check of :mod:`.consistency` on a frame's levels, unless they look like a
-    fully open condenser (the NA measurable from the levels ends near the objective's; :func:`_white`
-    names that case)."""
-    if lenslets is None:
-        return
-    seen = consistency.apparent_condenser_na(levels, lenslets, optics)
-    if seen[0] < 0.85 * optics.na:
-        consistency.check_condenser_na(seen, optics, name, fix)
+def _lighting(
+    levels, top: float, lenslets, optics, name: str, fix: str, white_fix: str, flat: bool = False
+) -> float | None:
+    """The condenser-NA checks of :mod:`.consistency` and :func:`_white` on a frame's levels; the NA
+    they look lit at (None without ``lenslets``).
+
+    Near a fully open condenser every lenslet inside the pupil is lit whole and the fit cannot
+    tell the NAs there apart: it gives the lowest that lights them all, and the optics' NA fits as
+    well unless it is clearly lower. Such a frame is first checked for a white frame (named as one);
+    a frame whose NA is measurable is first checked for its NA (named with the number). A flat (no
+    sample) is held to the NA closely and reported a few per cent off; a raw frame, whose sample
+    moves its lenslets' light, only refused far off.
+    """
+    seen = None if lenslets is None else consistency.apparent_condenser_na(levels, lenslets, optics)
+    looks_open = seen is None or seen[0] >= 0.85 * optics.na
+    if looks_open:
+        _white(levels, top, optics, name, white_fix)
+    if seen is not None:
+        consistency.check_condenser_na(seen, optics, name, fix, flat)
+        if flat:
+            consistency.warn_condenser_na(seen, optics, name)
+    if not looks_open:
+        _white(levels, top, optics, name, white_fix)
+    return None if seen is None else seen[0]
 
 
 def _white(levels, top: float, optics, name: str, fix: str) -> None:
@@ -332,10 +351,12 @@ def check_frame_light(
     """
     on = levels[lit]
     signal = float(np.median(on))
+    fix = "set condenser_na to the NA the frames were recorded at (and record the flat at it)"
     if signal > 5 * noise:
-        fix = "set condenser_na to the NA the frames were recorded at (and record the flat at it)"
-        _condenser(levels, lenslets, optics, name, fix)
-        _white(levels, signal, optics, name, "give a raw frame recorded at that condenser NA, not the white frame")
+        white_fix = "give a raw frame recorded at that condenser NA, not the white frame"
+        _lighting(levels, signal, lenslets, optics, name, fix, white_fix)
+    elif lenslets is not None and float(np.max(levels)) > 5 * noise:  # light, but not where the optics put it
+        consistency.check_condenser_na(consistency.apparent_condenser_na(levels, lenslets, optics), optics, name, fix)
     if not signal > 5 * noise:
         raise SsdpcError(
             f"{name}: no light in the directly lit elemental images (median {signal:.3g} above the dark level, "

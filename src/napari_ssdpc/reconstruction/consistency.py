@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from typing import NamedTuple
 
 import numpy as np
 import scipy.fft as sfft
@@ -22,30 +23,52 @@ from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.settings.lenslets import circle_overlap_fraction
 
 __all__ = [
+    "ApparentNA",
     "EI_SHIFT_TOLERANCE_PX",
     "EXPOSURE_TOLERANCE",
     "MAX_EI_SHIFT_PX",
     "NA_EXCESS",
+    "NA_EXCESS_LIGHT",
     "NA_RATIO",
+    "NA_RATIO_FLAT",
+    "NA_WARN",
+    "MISFIT_FLOOR",
     "apparent_condenser_na",
     "check_condenser_na",
     "check_ei_shift",
     "check_exposure",
     "check_lit_lenslets",
+    "warn_condenser_na",
     "ei_shift_px",
     "ei_templates",
 ]
 
 
-def apparent_condenser_na(levels, lenslets, optics) -> tuple[float, float]:
-    """The condenser NA a frame's lenslet levels look recorded at, and how much better it fits.
+#: The smallest misfit a fit of the lenslets' levels is held to (the brightest lenslet's light
+#: squared): the noise of the median levels of a flat.
+MISFIT_FLOOR = 1e-4
+
+
+class ApparentNA(NamedTuple):
+    """The condenser NA a frame's lenslets look lit at (:func:`apparent_condenser_na`)."""
+
+    na: float  #: the best-fitting condenser NA
+    excess: float  #: the optics' NA's misfit over the best's, in units of ``misfit``
+    misfit: float  #: the best NA's misfit (at least MISFIT_FLOOR), the brightest lenslet's light squared
+
+
+def apparent_condenser_na(levels, lenslets, optics) -> ApparentNA:
+    """The condenser NA a frame's lenslet levels look recorded at, and how clearly the optics' NA is
+    excluded.
 
     A lenslet's direct light is the area of the condenser disk |u| ≤ NA_c/λ inside its sub-aperture
-    (paper Eq. 2): the overlap of two circles. The NA whose overlaps, scaled to their largest, best
-    fit the measured levels (scaled the same way) over the lenslets wholly inside the objective's
-    pupil, on a 0.005 NA grid. Where several NAs light the same lenslets alike (a small condenser
-    NA lights the few central lenslets at any NA), the fit cannot tell them apart: the excess
-    misfit of the optics' NA over the best says how clearly it is excluded.
+    (paper Eq. 2): the overlap of two circles. Over the lenslets wholly inside the objective's
+    pupil, the measured levels (scaled to their largest) are fitted by the overlaps times the
+    best scale (least squares; the lamp's brightness is unknown); the NA is searched on a 0.005 grid
+    refined to 0.0005 about the best. Where several NAs light the same lenslets alike (near a fully
+    open condenser every inner lenslet is lit whole), the fit cannot tell them apart, and the
+    misfit the best NA leaves (lenslets that transmit unequally, vignetting, noise) says how far
+    others are from it: the optics' NA is excluded only where it fits worse by more than that.
 
     Parameters
     ----------
@@ -58,25 +81,27 @@ def apparent_condenser_na(levels, lenslets, optics) -> tuple[float, float]:
 
     Returns
     -------
-    na : float
-        The best-fitting condenser NA.
-    excess : float
-        Σ (level − model)² at the optics' NA minus at the best, in units of the brightest lenslet's
-        light squared (1: one lenslet wholly lit where it should be dark).
+    ApparentNA
+        ``na``, the best-fitting condenser NA; ``excess``, the misfit at the optics' NA minus the
+        best, over the best's own misfit ``misfit`` (at least :data:`MISFIT_FLOOR`): above 1 the
+        optics' NA explains the levels clearly worse than the best one.
     """
     inner = np.array([ln.fraction >= 0.999 for ln in lenslets])
     d = np.hypot(*np.array([ln.u for ln in lenslets], float)[inner].T)
     lv = np.clip(np.asarray(levels, float)[inner], 0, None)
     lv = lv / max(lv.max(), 1e-30)
 
-    def misfit(na):
-        model = circle_overlap_fraction(d, optics.subaperture_radius, na / optics.wavelength_um)
-        return float(np.sum((lv - model / max(model.max(), 1e-30)) ** 2))
+    def misfit(na):  # Σ (lv − s m)² at the best scale s
+        m = circle_overlap_fraction(d, optics.subaperture_radius, na / optics.wavelength_um)
+        return float(lv @ lv - (lv @ m) ** 2 / max(m @ m, 1e-30))
 
-    nas = np.arange(0.01, optics.na + 1e-9, 0.005)
-    err = [misfit(na) for na in nas]
+    coarse = np.arange(0.01, optics.na + 1e-9, 0.005)
+    na0 = coarse[int(np.argmin([misfit(na) for na in coarse]))]
+    fine = np.arange(max(0.01, na0 - 0.005), min(optics.na, na0 + 0.005) + 1e-9, 0.0005)
+    err = [misfit(na) for na in fine]
     best = int(np.argmin(err))
-    return float(nas[best]), misfit(float(optics.condenser_na)) - err[best]
+    floor = max(err[best], MISFIT_FLOOR)
+    return ApparentNA(round(float(fine[best]), 4), (misfit(float(optics.condenser_na)) - err[best]) / floor, floor)
 
 
 def check_lit_lenslets(lenslets, optics, name: str = "flat frame") -> None:
@@ -108,28 +133,68 @@ def check_lit_lenslets(lenslets, optics, name: str = "flat frame") -> None:
 
 
 #: A frame is refused as lit at another condenser NA when the optics' NA fits its lenslets' light
-#: worse than the best NA by this much (a quarter of one lenslet's light, squared) and the two NAs
-#: differ by more than 30 % (the play of a condenser's scale).
-NA_EXCESS, NA_RATIO = 0.25, 1.3
+#: clearly worse than the best NA (the excess of :func:`apparent_condenser_na` above ``NA_EXCESS``)
+#: and the two NAs differ by more than ``NA_RATIO_FLAT`` for a flat (a bead's peak Δn came out 21 %
+#: low with a flat and frame at 0.315 reconstructed as 0.3, and 44 % low at 0.33) or ``NA_RATIO``
+#: for a raw frame. A raw frame's sample moves its lenslets' light: a smooth modulation of 5-30 %
+#: moved the fit of frames at 0.1 by up to 46 % with an excess up to 6.5 (at 0.3 by 1 %), so a raw
+#: frame is also held to an absolute excess, ``NA_EXCESS_LIGHT`` (the brightest lenslet's light
+#: squared; those modulations reached 0.009): frames at 0.1 read as 0.2 or 0.3 exceed it 3-10 times.
+NA_EXCESS, NA_RATIO_FLAT, NA_RATIO, NA_EXCESS_LIGHT = 5.0, 1.1, 1.3, 0.25
 
 
-def check_condenser_na(seen: tuple[float, float], optics, name: str, fix: str) -> None:
+def check_condenser_na(seen: ApparentNA, optics, name: str, fix: str, flat: bool = False) -> None:
     """Refuse a frame lit at another condenser NA than the optics say.
 
     Parameters
     ----------
-    seen : (float, float)
+    seen : ApparentNA
         :func:`apparent_condenser_na` of the frame.
     optics : Optics
     name, fix : str
         For the message.
+    flat : bool
+        Whether the frame is a flat (no sample: held to :data:`NA_RATIO_FLAT`).
     """
-    na_seen, excess = seen
+    na_seen, excess, misfit = seen
     na = float(optics.condenser_na)
-    if excess > NA_EXCESS and not 1 / NA_RATIO <= na_seen / na <= NA_RATIO:
+    ratio = NA_RATIO_FLAT if flat else NA_RATIO
+    clear = excess > NA_EXCESS and (flat or excess * misfit > NA_EXCESS_LIGHT)
+    if clear and not 1 / ratio <= na_seen / na <= ratio:
+        seen_text = f"about {na_seen:.3f}" if na_seen < 0.85 * optics.na else f"{na_seen:.3f} or more (open)"
         raise SsdpcError(
-            f"{name}: its lenslets are lit as by a condenser NA of about {na_seen:.2f}, but the optics say {na:g}; "
-            f"{fix}"
+            f"{name}: its lenslets are lit as by a condenser NA of {seen_text}, but the optics say {na:g}; {fix}"
+        )
+
+
+#: A flat is reported (a warning, the result kept) when its lenslets' light fits an NA that differs
+#: from the optics' by more than this (relative) and fits better (excess above 1: the optics' NA
+#: leaves twice the best one's misfit). On flats at 0.3 with lenslets transmitting 2-5 % unequally
+#: the fit stayed within 0.3-0.8 % of the truth (excess at most 0.6).
+NA_WARN = 0.03
+
+
+def warn_condenser_na(seen: ApparentNA, optics, name: str) -> None:
+    """Report a flat lit at a condenser NA a few per cent off the optics' (where
+    :func:`check_condenser_na` does not refuse it).
+
+    Parameters
+    ----------
+    seen : ApparentNA
+        :func:`apparent_condenser_na` of the frame.
+    optics : Optics
+    name : str
+        For the message.
+    """
+    na_seen, excess, _ = seen
+    na = float(optics.condenser_na)
+    if excess > 1 and abs(na_seen / na - 1) > NA_WARN:
+        warnings.warn(
+            f"{name}: its lenslets are lit as by a condenser NA of {na_seen:.3f}, the optics say {na:g}: Δn depends "
+            f"on it through the transfer functions (5 % off moved a bead's peak Δn by 21 %); set condenser_na to "
+            f"{na_seen:.3f} if the condenser was there",
+            SsdpcWarning,
+            stacklevel=4,
         )
 
 

@@ -77,9 +77,11 @@ class ViewContrast:
         self.mask = geom.mask
         self.x_um, self.y_um, self.pixel_um = geom.x_um, geom.y_um, geom.pixel_um
         fv = None
+        #: The condenser NA the flat's lenslets look lit at (None without a flat).
+        self.condenser_na_seen: float | None = None
         if flat is not None:  # without a flat, each lenslet's direct light comes from the transfer model
             levels, noise, fv = self._measure(flat, "flat frame")
-            checks.check_flat(levels, noise, optics, lenslets=cal.lenslets)
+            self.condenser_na_seen = checks.check_flat(levels, noise, optics, lenslets=cal.lenslets)
             fv = np.clip(fv, 0, None)
         self.level = level = self._direct_light(fv)
         lit = level >= min_light * level.max()

@@ -348,6 +348,7 @@ class Reconstructor:
             "z_max_um": float(self.z_um[-1]),
             "dz_um": self.dz,
             "medium_index": float(self.optics.medium_index),  # RI = medium_index + Δn
+            "condenser_na_seen": self.views.condenser_na_seen,  # measured on the flat
             **self.method.settings(),
             "lenslets_used": [[ln.row, ln.col] for ln in self.lenslets],
         }
