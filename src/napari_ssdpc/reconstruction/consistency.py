@@ -311,8 +311,9 @@ def check_exposure(exposure: float, name: str) -> None:
         For the message.
     """
     if abs(exposure - 1) > EXPOSURE_TOLERANCE:
+        factor = f"{exposure:.2f}" if exposure >= 0.1 else f"{exposure:.2g}"  # a float frame of 0..1: 0.00024
         warnings.warn(
-            f"{name} is {exposure:.2f} x as bright as the flat frame (exposure time, lamp or gain changed): its views "
+            f"{name} is {factor} x as bright as the flat frame (exposure time, lamp or gain changed): its views "
             "were normalised to the flat's level (metadata exposure_ratio); record frame and flat alike",
             SsdpcWarning,
             stacklevel=3,
