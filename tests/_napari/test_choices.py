@@ -15,8 +15,7 @@ pytest.importorskip("pytestqt")
 
 import gui_steps as _steps
 from napari_ssdpc._napari import notify as _notify
-from napari_ssdpc._napari.layers import result_layer
-from napari_ssdpc._napari.reader import calibration_layers
+from napari_ssdpc._napari.layers import calibration_layers, result_layer
 
 
 @pytest.fixture

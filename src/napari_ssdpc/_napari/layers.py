@@ -1,7 +1,8 @@
-"""How a result looks in napari: one layer per quantity, styled from the registry of outputs.
+"""How a result and a calibration look in napari: one layer per quantity, styled from the
+registry of outputs; a calibration's EI circles, centres and deviations.
 
-The readers and the widgets both build their result layers here, so a file opened from disk
-looks exactly like a freshly computed result.
+The readers and the widgets both build their layers here, so a file opened from disk looks
+exactly like a freshly computed result or calibration.
 """
 
 from __future__ import annotations
@@ -10,7 +11,16 @@ import numpy as np
 
 from napari_ssdpc.settings.outputs import display
 
-__all__ = ["PSF_STYLE", "SPIKE_RATIO", "axial_fwhm_um", "is_map", "object_extremes", "resolution_text", "result_layer"]
+__all__ = [
+    "PSF_STYLE",
+    "SPIKE_RATIO",
+    "axial_fwhm_um",
+    "calibration_layers",
+    "is_map",
+    "object_extremes",
+    "resolution_text",
+    "result_layer",
+]
 
 #: A voxel this many times above the level of its 3 x 3 surroundings is a spike, not an object's peak.
 SPIKE_RATIO = 1.5
@@ -198,3 +208,75 @@ def result_layer(data, quantity: str, voxel_um, origin_um, *, name: str, info: d
         "metadata": {"ssdpc": info},
     }
     return (data, kwargs, "image")
+
+
+def calibration_layers(cal, name: str) -> list:
+    """Layer data of a calibration: a Shapes layer of EI circles (green: at least half inside the
+    pupil, orange: clipped edge lenslets), Points of the EI centres labelled (row, col) plus the
+    optical axis, and Vectors of each measured centre's deviation from the lattice (magnified by
+    ``metadata['ssdpc']['deviation_gain']``). All carry the calibration dict in
+    ``metadata['ssdpc']['calibration']``.
+
+    Parameters
+    ----------
+    cal : Calibration
+    name : str
+        Stem of the layer names.
+
+    Returns
+    -------
+    list of (data, kwargs, type)
+    """
+    d = cal.to_dict()
+    meta = {"ssdpc": {"kind": "calibration", "calibration": d}}
+    r = float(cal.ei_radius_px)
+    c = np.asarray(cal.centres_px, float)  # (K, 2) x, y
+    ellipses = [np.array([[cy - r, cx - r], [cy - r, cx + r], [cy + r, cx + r], [cy + r, cx - r]]) for cx, cy in c]
+    edge = ["lime" if ln.fraction >= 0.5 else "orange" for ln in cal.lenslets]
+    shapes = (
+        ellipses,
+        {
+            "name": f"{name} EI circles",
+            "shape_type": "ellipse",
+            "edge_color": edge,
+            "face_color": "transparent",
+            "edge_width": 2,
+            "metadata": meta,
+        },
+        "shapes",
+    )
+    ax, ay = cal.grid.axis_px
+    pts = np.vstack([c[:, ::-1], [[ay, ax]]])
+    labels = [f"({ln.row}, {ln.col})" for ln in cal.lenslets] + ["axis"]
+    points = (
+        pts,
+        {
+            "name": f"{name} EI centres",
+            "features": {"label": labels},
+            "text": {
+                "string": "{label}",
+                "color": "magenta",
+                "size": 10,
+                "anchor": "center",
+                "translation": [-0.45 * r, 0.0],
+            },
+            "symbol": ["disc"] * len(c) + ["cross"],
+            "size": [8] * len(c) + [30],
+            "face_color": ["lime"] * len(c) + ["red"],
+            "metadata": meta,
+        },
+        "points",
+    )
+    start, arrow, gain = cal.deviation_arrows()
+    vectors = (
+        np.stack([start[:, ::-1], arrow[:, ::-1]], axis=1).reshape(-1, 2, 2),  # (M, [position, arrow], (y, x))
+        {
+            "name": f"{name} EI deviations",  # magnified: see the metadata
+            "edge_color": "cyan",
+            "edge_width": 2,
+            "vector_style": "arrow",
+            "metadata": {"ssdpc": {**meta["ssdpc"], "deviation_gain": gain}},
+        },
+        "vectors",
+    )
+    return [shapes, points, vectors]

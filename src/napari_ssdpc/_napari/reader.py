@@ -2,7 +2,7 @@
 
 Each ``get_*_reader(path)`` looks inside the file and returns None when it is not its own, so
 napari can try another reader. The layers are built as the widgets build them
-(``calibration_layers`` here, ``layers.result_layer``), so a file opened from disk looks exactly
+(``layers.calibration_layers``, ``layers.result_layer``), so a file opened from disk looks exactly
 like a freshly computed result.
 """
 
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from napari_ssdpc._napari.layers import is_map, result_layer
+from napari_ssdpc._napari.layers import calibration_layers, is_map, result_layer
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.frames import TiffInfo, tiff_info
 from napari_ssdpc.settings.outputs import QUANTITIES
@@ -184,78 +184,6 @@ def read_calibration(path):
     p = Path(path)
     cal = Calibration.from_json(p)
     return calibration_layers(cal, _stem(p))
-
-
-def calibration_layers(cal, name: str) -> list:
-    """Layer data of a calibration: a Shapes layer of EI circles (green: at least half inside the
-    pupil, orange: clipped edge lenslets), Points of the EI centres labelled (row, col) plus the
-    optical axis, and Vectors of each measured centre's deviation from the lattice (magnified by
-    ``metadata['ssdpc']['deviation_gain']``). All carry the calibration dict in
-    ``metadata['ssdpc']['calibration']``.
-
-    Parameters
-    ----------
-    cal : Calibration
-    name : str
-        Stem of the layer names.
-
-    Returns
-    -------
-    list of (data, kwargs, type)
-    """
-    d = cal.to_dict()
-    meta = {"ssdpc": {"kind": "calibration", "calibration": d}}
-    r = float(cal.ei_radius_px)
-    c = np.asarray(cal.centres_px, float)  # (K, 2) x, y
-    ellipses = [np.array([[cy - r, cx - r], [cy - r, cx + r], [cy + r, cx + r], [cy + r, cx - r]]) for cx, cy in c]
-    edge = ["lime" if ln.fraction >= 0.5 else "orange" for ln in cal.lenslets]
-    shapes = (
-        ellipses,
-        {
-            "name": f"{name} EI circles",
-            "shape_type": "ellipse",
-            "edge_color": edge,
-            "face_color": "transparent",
-            "edge_width": 2,
-            "metadata": meta,
-        },
-        "shapes",
-    )
-    ax, ay = cal.grid.axis_px
-    pts = np.vstack([c[:, ::-1], [[ay, ax]]])
-    labels = [f"({ln.row}, {ln.col})" for ln in cal.lenslets] + ["axis"]
-    points = (
-        pts,
-        {
-            "name": f"{name} EI centres",
-            "features": {"label": labels},
-            "text": {
-                "string": "{label}",
-                "color": "magenta",
-                "size": 10,
-                "anchor": "center",
-                "translation": [-0.45 * r, 0.0],
-            },
-            "symbol": ["disc"] * len(c) + ["cross"],
-            "size": [8] * len(c) + [30],
-            "face_color": ["lime"] * len(c) + ["red"],
-            "metadata": meta,
-        },
-        "points",
-    )
-    start, arrow, gain = cal.deviation_arrows()
-    vectors = (
-        np.stack([start[:, ::-1], arrow[:, ::-1]], axis=1).reshape(-1, 2, 2),  # (M, [position, arrow], (y, x))
-        {
-            "name": f"{name} EI deviations",  # magnified: see the metadata
-            "edge_color": "cyan",
-            "edge_width": 2,
-            "vector_style": "arrow",
-            "metadata": {"ssdpc": {**meta["ssdpc"], "deviation_gain": gain}},
-        },
-        "vectors",
-    )
-    return [shapes, points, vectors]
 
 
 # ======================================================================= reconstructions

@@ -6,7 +6,7 @@ import numpy as np
 from magicgui.widgets import ComboBox, FileEdit, Label, PushButton
 
 from napari_ssdpc._napari import notify
-from napari_ssdpc._napari.reader import calibration_layers
+from napari_ssdpc._napari.layers import calibration_layers
 from napari_ssdpc._napari.widgets.choices import LayerChoice, image_layer_choices
 from napari_ssdpc._napari.widgets.common import (
     StepWidget,
