@@ -1,7 +1,7 @@
 from .measure import KINDS, calibrate
 from .overlay import overlay_png
-from .result import Calibration, Views
-from .views import extract_views, insert_views
+from .result import Calibration
+from .views import Views, extract_views, insert_views
 
 __all__ = [
     "Calibration",

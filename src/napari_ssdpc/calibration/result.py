@@ -367,31 +367,6 @@ class Calibration:
         return cls.from_dict(d, source=str(path), verify=verify)
 
 
-@dataclass(eq=False)
-class Views:
-    """Elemental images resampled on an upright object grid.
-
-    ``data[k]`` (h, w) is the EI of ``lenslets[k]``; pixel (i, j) shows the in-focus
-    object point (``x_um[j]``, ``y_um[i]``) µm, with (0, 0) on the EI centre. ``mask`` is
-    the iris disk (True inside).
-    """
-
-    data: np.ndarray
-    lenslets: list[Lenslet]
-    centres_px: np.ndarray
-    x_um: np.ndarray
-    y_um: np.ndarray
-    mask: np.ndarray
-    pixel_um: float
-    frame_shape: tuple[int, int] = (0, 0)
-
-    @property
-    def extent_um(self) -> tuple[float, float, float, float]:
-        """matplotlib ``imshow`` extent (left, right, bottom, top) in µm."""
-        h = 0.5 * self.pixel_um
-        return (float(self.x_um[0] - h), float(self.x_um[-1] + h), float(self.y_um[-1] + h), float(self.y_um[0] - h))
-
-
 # ------------------------------------------------------------------ validation
 def validated(frame, name="frame") -> np.ndarray:
     """The frame as a float32 (H, W) array; one-line SsdpcError for anything else.
