@@ -20,6 +20,7 @@ import numpy as np
 
 from napari_ssdpc.simulation import phantoms as ph
 from napari_ssdpc.validation import cases as val
+from napari_ssdpc.validation import truth as vt
 
 HERE = Path(__file__).parent
 RESOLUTION_UM = (20.7, 3.9)  # (R_z, R_xy) of the paper's optics
@@ -28,10 +29,10 @@ RESOLUTION_UM = (20.7, 3.9)  # (R_z, R_xy) of the paper's optics
 def bead_rows(res, spheres, medium, wavelength_um):
     rows = []
     for s in spheres:
-        m = val.bead_metrics(res, s, medium)
+        m = vt.bead_metrics(res, s, medium)
         rows.append(
             {
-                **val.projected_phase_metrics(res, s, medium, wavelength_um),
+                **vt.projected_phase_metrics(res, s, medium, wavelength_um),
                 "dn_true": m["dn_true"],
                 "dn_peak": m["dn_peak"],
                 "depth_error_um": m["centroid_um"][2] - s.center_um[2],
@@ -70,13 +71,13 @@ def main():
             res, _, _ = val.reconstruct_case(case, z=z, stacks=False, method=method)
             seconds = time.perf_counter() - t0
             if isinstance(phantom, ph.Cell):
-                m = val.cell_metrics(res, case.phantom, RESOLUTION_UM)
+                m = vt.cell_metrics(res, case.phantom, RESOLUTION_UM)
                 row = {k: v for k, v in m.items()}
             else:
                 spheres = case.phantom.spheres if hasattr(case.phantom, "spheres") else [case.phantom]
                 row = {
                     "beads": bead_rows(res, spheres, medium, optics.wavelength_um),
-                    **val.truth_metrics(res, phantom, medium, RESOLUTION_UM),
+                    **vt.truth_metrics(res, phantom, medium, RESOLUTION_UM),
                 }
             row["seconds"] = seconds
             row["tv"] = {k: v for k, v in res.settings.items() if k.startswith("tv_")}

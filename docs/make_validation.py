@@ -24,6 +24,7 @@ import numpy as np
 from napari_ssdpc.physics import transfer
 from napari_ssdpc.simulation import phantoms as ph
 from napari_ssdpc.validation import cases as val
+from napari_ssdpc.validation import truth as vt
 from napari_ssdpc.validation.figures import bead_figure
 
 DOCS = Path(__file__).resolve().parent
@@ -62,7 +63,7 @@ def main():
         out["cases"][f"bead_na{na:g}"] = {"simulation_s": case.seconds}
         for mname, kw in METHODS.items():
             res, cal, rec = val.reconstruct_case(case, stacks=False, **kw)
-            m = val.bead_metrics(res, case.phantom, case.optics.medium_index)
+            m = vt.bead_metrics(res, case.phantom, case.optics.medium_index)
             m["reconstruction_s"] = sum(res.timings.values())
             out["cases"][f"bead_na{na:g}"][mname] = _clean(m)
             if mname == "wotf":
@@ -81,7 +82,7 @@ def main():
     for mname, kw in METHODS.items():
         res, cal, rec = val.reconstruct_case(case, stacks=False, **kw)
         out["cases"]["two-beads"][mname] = [
-            _clean(val.bead_metrics(res, s, case.optics.medium_index)) for s in case.phantom.spheres
+            _clean(vt.bead_metrics(res, s, case.optics.medium_index)) for s in case.phantom.spheres
         ]
         if mname == "wotf":
             bead_figure(
@@ -98,7 +99,7 @@ def main():
     out["cases"]["cell"] = {"simulation_s": case.seconds}
     for mname, kw in METHODS.items():
         res, cal, rec = val.reconstruct_case(case, z=(-40, 40), stacks=False, **kw)
-        out["cases"]["cell"][mname] = _clean(val.cell_metrics(res, case.phantom, RESOLUTION))
+        out["cases"]["cell"][mname] = _clean(vt.cell_metrics(res, case.phantom, RESOLUTION))
     print("cell", time.perf_counter() - t0, flush=True)
 
     # --- bar target (absorption from the RL stacks)
@@ -106,7 +107,7 @@ def main():
     out["cases"]["bars"] = {"simulation_s": case.seconds}
     for iterations in (40, 15):  # the figure shows the default (15)
         res, cal, rec = val.reconstruct_case(case, z=(0, 80), method="rl", stacks=True, rl={"iterations": iterations})
-        m = val.bar_metrics(res, case.phantom)
+        m = vt.bar_metrics(res, case.phantom)
         out["cases"]["bars"][f"iterations_{iterations}"] = _clean(m)
     iz = int(np.argmin(abs(res.z_um - case.phantom.z_um)))
     fig, ax = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
@@ -130,7 +131,7 @@ def main():
             o = optics.replace(condenser_na=na)
             case = val.simulate_case("weak-bead", weak, o, cache_dir=args.cache)
             res, cal, rec = val.reconstruct_case(case, z=(-60, 60), stacks=False, method="wotf")
-            m = val.bead_metrics(res, weak, 1.518)
+            m = vt.bead_metrics(res, weak, 1.518)
             tf = transfer.dpc_transfer_functions(o, rec.lenslets, rec.mask.shape, rec.pixel_um, warn=False)
             out["sweep"][f"{na:g}"] = {
                 **_clean(m),

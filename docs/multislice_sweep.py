@@ -24,6 +24,7 @@ import numpy as np
 
 from napari_ssdpc.simulation import phantoms as ph
 from napari_ssdpc.validation import cases as val
+from napari_ssdpc.validation import truth as vt
 from napari_ssdpc.validation.mass import mass_and_tail
 
 HERE = Path(__file__).parent
@@ -60,14 +61,14 @@ def measure(res, phantom, medium) -> dict:
     bead = isinstance(phantom, ph.Sphere)
     out = mass_and_tail(res, phantom, medium)
     if bead:
-        m = val.bead_metrics(res, phantom, medium)
+        m = vt.bead_metrics(res, phantom, medium)
         out.update(
             centroid_z=m["centroid_um"][2] - cz, dn_peak=m["dn_peak"], dn_true=m["dn_true"], ri_centre=m["ri_centre"]
         )
     else:
         pos = res.delta_n.astype(float).clip(0)
         out["centroid_z"] = float((pos.sum(axis=(1, 2)) * res.z_um).sum() / pos.sum()) - cz
-        out.update({k: float(v) for k, v in val.cell_metrics(res, phantom, RESOLUTION_UM).items() if np.isscalar(v)})
+        out.update({k: float(v) for k, v in vt.cell_metrics(res, phantom, RESOLUTION_UM).items() if np.isscalar(v)})
     return out
 
 

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from napari_ssdpc.simulation import phantoms as ph
 from napari_ssdpc.validation import cases as val
+from napari_ssdpc.validation import truth as vt
 
 HERE = Path(__file__).parent
 MEDIUM = 1.518
@@ -39,12 +40,12 @@ def main():
             case = val.simulate_case(name, bead, optics, cache_dir=args.cache, source_step=4)
             for method in ("tv", "wotf"):
                 res, _, _ = val.reconstruct_case(case, z=Z_UM, stacks=False, method=method)
-                m = val.bead_metrics(res, bead, MEDIUM)
+                m = vt.bead_metrics(res, bead, MEDIUM)
                 row = {
                     "diameter_um": d,
                     "dn": sign * dn_abs,
                     "method": method,
-                    **val.projected_phase_metrics(res, bead, MEDIUM, optics.wavelength_um),
+                    **vt.projected_phase_metrics(res, bead, MEDIUM, optics.wavelength_um),
                     "peak_ratio": m["dn_peak"] / m["dn_true"],
                     "depth_error_um": m["centroid_um"][2],
                     "fwhm_z_um": m["fwhm_z_um"],

@@ -49,6 +49,7 @@ from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation import phantoms as ph
 from napari_ssdpc.simulation.moving import changing_cell, gliding_cell_and_bead
 from napari_ssdpc.validation import cases as val
+from napari_ssdpc.validation import truth as vt
 
 HERE = Path(__file__).parent
 Z_UM, DZ_UM, NA = (-40.0, 40.0), 1.0, 0.25
@@ -81,8 +82,8 @@ def truths(phantoms, rec, moving, resting):
     field = np.broadcast_to(ndimage.binary_erosion(rec.mask, iterations=4), (len(rec.z_um),) + rec.mask.shape)
     out = []
     for p in phantoms:
-        truth = val.truth_volume(p, grid, MEDIUM)
-        blurred = val.truth_volume(p, grid, MEDIUM, blur_um=RESOLUTION_UM)
+        truth = vt.truth_volume(p, grid, MEDIUM)
+        blurred = vt.truth_volume(p, grid, MEDIUM, blur_um=RESOLUTION_UM)
         far = ndimage.distance_transform_edt(truth == 0, sampling=grid.voxel_um) > BACKGROUND_UM
         # beyond the resolution too: outside the support grown by 10 µm laterally and FWHM_z along z
         scaled = (DZ_UM * BACKGROUND_UM / AXIAL_UM, rec.pixel_um, rec.pixel_um)

@@ -33,6 +33,7 @@ from napari_ssdpc.pipeline.sinks import MemorySink
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation import moving
 from napari_ssdpc.validation import cases as val
+from napari_ssdpc.validation import truth as vt
 
 HERE = Path(__file__).parent
 Z_UM, DZ_UM, NA = (-60.0, 60.0), 1.0, 0.25
@@ -49,7 +50,7 @@ def run(job, rec, frames, phantoms, warm: bool):
     for t, timing in enumerate(report.timings):
         dn, meta = keep.frames[t]
         res = SimpleNamespace(delta_n=dn, voxel_um=(DZ_UM, rec.pixel_um, rec.pixel_um), **grid)
-        m = val.truth_metrics(res, phantoms[t], float(phantoms[t].medium_index), RESOLUTION_UM)
+        m = vt.truth_metrics(res, phantoms[t], float(phantoms[t].medium_index), RESOLUTION_UM)
         out.append({"dn": dn, "s": timing["reconstruct_s"], "iterations": meta["tv_iterations_run"], **m})
     return report, out
 

@@ -12,7 +12,8 @@ from napari_ssdpc.errors import Cancelled, SsdpcError, SsdpcWarning
 from napari_ssdpc.reconstruction.reconstructor import Reconstructor, z_grid
 from napari_ssdpc.simulation import phantoms
 from napari_ssdpc.validation import metrics as an
-from napari_ssdpc.validation.cases import run_config, simulate_case, truth_volume
+from napari_ssdpc.validation.cases import run_config, simulate_case
+from napari_ssdpc.validation.truth import truth_volume
 
 BEAD = phantoms.Sphere((4.0, -3.0, 0.0), 6.0, 1.528, medium_index=1.518)  # weak: 0.7 rad through the centre
 

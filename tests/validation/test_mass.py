@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from napari_ssdpc.simulation.phantoms import Sphere
-from napari_ssdpc.validation.cases import truth_volume
 from napari_ssdpc.validation.figures import comparison_figure
 from napari_ssdpc.validation.mass import mass_and_tail
+from napari_ssdpc.validation.truth import truth_volume
 
 MEDIUM = 1.518
 

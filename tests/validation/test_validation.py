@@ -13,6 +13,7 @@ import pytest
 
 from napari_ssdpc.simulation import phantoms as ph
 from napari_ssdpc.validation import cases as val
+from napari_ssdpc.validation import truth as vt
 from napari_ssdpc.validation.mass import mass_and_tail
 
 pytestmark = pytest.mark.slow
@@ -30,7 +31,7 @@ def bead(cache):
     case = val.simulate_case("bead", ph.pmma_bead(), val.paper_optics(), cache_dir=cache)
     res, _, _ = val.reconstruct_case(case, stacks=False)  # the default method, 'tv'
     assert res.settings["method"] == "tv" and res.settings["tv_sign"].startswith("auto: lighter")
-    return val.bead_metrics(res, case.phantom, 1.518)
+    return vt.bead_metrics(res, case.phantom, 1.518)
 
 
 @pytest.fixture(scope="module")
@@ -38,7 +39,7 @@ def two_beads(cache):
     case = val.simulate_case("two-beads", ph.two_beads(), val.paper_optics(), cache_dir=cache)
     res, _, _ = val.reconstruct_case(case, stacks=False)
     assert res.settings["tv_sign"].startswith("auto: denser")
-    return [val.bead_metrics(res, s, 1.518) for s in case.phantom.spheres], case.phantom.spheres
+    return [vt.bead_metrics(res, s, 1.518) for s in case.phantom.spheres], case.phantom.spheres
 
 
 @pytest.fixture(scope="module")
@@ -47,9 +48,9 @@ def weak_bead(cache):
     case = val.simulate_case("weak-bead", bead, val.paper_optics(), cache_dir=cache)
     res, _, _ = val.reconstruct_case(case, z=(-40, 40), stacks=False)
     return {
-        **val.bead_metrics(res, bead, 1.518),
-        **val.projected_phase_metrics(res, bead, 1.518, case.optics.wavelength_um),
-        **val.truth_metrics(res, bead, 1.518, (20.7, 3.9)),
+        **vt.bead_metrics(res, bead, 1.518),
+        **vt.projected_phase_metrics(res, bead, 1.518, case.optics.wavelength_um),
+        **vt.truth_metrics(res, bead, 1.518, (20.7, 3.9)),
     }
 
 
@@ -108,7 +109,7 @@ def test_two_beads_found_at_their_depths(two_beads):
 def cell(cache):
     case = val.simulate_case("cell", ph.cell(), val.paper_optics(), cache_dir=cache)
     res, _, _ = val.reconstruct_case(case, z=(-40, 40), stacks=False)
-    return val.cell_metrics(res, case.phantom, (20.7, 3.9))
+    return vt.cell_metrics(res, case.phantom, (20.7, 3.9))
 
 
 @pytest.mark.xfail(
@@ -125,7 +126,7 @@ def test_cell_nucleus_ri_matches_the_blurred_truth(cell):
 def test_bar_target_resolved_at_its_depth(cache):
     case = val.simulate_case("bars", ph.bar_target(), val.paper_optics(), cache_dir=cache)
     res, _, _ = val.reconstruct_case(case, z=(0, 80), method="rl", stacks=True)
-    m = val.bar_metrics(res, case.phantom)
+    m = vt.bar_metrics(res, case.phantom)
     assert abs(m["best_focus_z_um"] - case.phantom.z_um) < 5.0  # measured 38 µm
     for period in (8.76, 6.2, 4.92):
         assert m["contrast"][period] > 0.10  # measured 1.0, 1.0, 0.13
@@ -139,7 +140,7 @@ def test_bar_target_resolved_at_its_depth(cache):
 def test_bar_target_finest_element_resolved(cache):
     case = val.simulate_case("bars", ph.bar_target(), val.paper_optics(), cache_dir=cache)
     res, _, _ = val.reconstruct_case(case, z=(0, 80), method="rl", stacks=True)
-    assert val.bar_metrics(res, case.phantom)["contrast"][4.38] > 0.10
+    assert vt.bar_metrics(res, case.phantom)["contrast"][4.38] > 0.10
 
 
 @pytest.fixture(scope="module")
@@ -155,7 +156,7 @@ def silica(cache):
             res, _, _ = val.reconstruct_case(case, z=(-30, 30), method=method)
         said = [str(w.message) for w in caught]
         m = mass_and_tail(res, sphere, 1.333)
-        out[method] = (res, m["integrated"], m["tail"], val.bead_metrics(res, sphere, 1.333), said)
+        out[method] = (res, m["integrated"], m["tail"], vt.bead_metrics(res, sphere, 1.333), said)
     return out
 
 

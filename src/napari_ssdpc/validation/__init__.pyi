@@ -6,6 +6,7 @@ from . import (
     figures,
     metrics,
     reference,
+    truth,
 )
 
 __all__ = [
@@ -16,4 +17,5 @@ __all__ = [
     "figures",
     "metrics",
     "reference",
+    "truth",
 ]

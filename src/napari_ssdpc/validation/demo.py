@@ -19,9 +19,10 @@ from napari_ssdpc.settings.reconstruction import DEFAULT_Z_UM
 from napari_ssdpc.simulation import phantoms
 from napari_ssdpc.simulation.sample_free import flat_frame, white_frame
 from napari_ssdpc.simulation.simulate import simulate
-from napari_ssdpc.validation.cases import VALIDATION_NA, bead_metrics, run_config
+from napari_ssdpc.validation.cases import VALIDATION_NA, run_config
 from napari_ssdpc.validation.figures import bead_figure, comparison_figure
 from napari_ssdpc.validation.mass import mass_and_tail
+from napari_ssdpc.validation.truth import bead_metrics
 
 # What the demo writes into its folder (each file atomically; the three frames as one set).
 DEMO_FILES = ("bead.tif", "flat.tif", "white.tif", "calibration.json", "calibration.png", "ri.ome.tif", "summary.png")
@@ -54,7 +55,7 @@ def run_demo(
     -------
     dict
         ``calibration`` (Calibration), ``result`` (Result), ``metrics`` (of
-        :func:`~napari_ssdpc.validation.cases.bead_metrics`), ``simulation_s`` and
+        :func:`~napari_ssdpc.validation.truth.bead_metrics`), ``simulation_s`` and
         ``reconstruction_s`` (s); with ``refine`` also ``refined`` (Result), ``refined_metrics``
         and ``refine_s`` (s).
     """

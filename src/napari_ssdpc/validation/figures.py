@@ -18,7 +18,7 @@ def _plt():
 
 def _truth_and_centre(result, sphere, medium_index):
     """The true RI on the result's grid, and the index (z, y, x) of the voxel at the bead's centre."""
-    from napari_ssdpc.validation.cases import _index, truth_volume
+    from napari_ssdpc.validation.truth import _index, truth_volume
 
     x, y, z = sphere.center_um
     return medium_index + truth_volume(sphere, result, medium_index), _index(result, (z, y, x))

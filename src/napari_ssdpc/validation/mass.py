@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from napari_ssdpc.validation.cases import truth_volume
+from napari_ssdpc.validation.truth import truth_volume
 
 __all__ = ["mass_and_tail"]
 
