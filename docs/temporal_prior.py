@@ -49,6 +49,7 @@ from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation import phantoms as ph
 from napari_ssdpc.simulation.moving import changing_cell, gliding_cell_and_bead
 from napari_ssdpc.validation import cases as val
+from napari_ssdpc.validation import metrics as an
 from napari_ssdpc.validation import truth as vt
 
 HERE = Path(__file__).parent
@@ -126,7 +127,7 @@ def measure(dn, truth, rec, base=None):
         box = truth[t]["moving"]
         errors.append((_centroid(dn[t], rec, box) - truth[t]["moving_centroid"]).tolist())
         peaks.append(float(dn[t][box].max()))
-        corr.append(val.an.correlation(dn[t], truth[t]["blurred"], box))
+        corr.append(an.correlation(dn[t], truth[t]["blurred"], box))
     out["moving_centroid_error_um"] = errors  # (x, y, z) per frame
     out["moving_centroid_error_max_um"] = float(np.max(np.linalg.norm(errors, axis=1)[1:]))
     out["moving_peak"] = peaks
@@ -138,7 +139,7 @@ def measure(dn, truth, rec, base=None):
         out["moving_shift_vs_per_frame_max_um"] = float(np.max(np.linalg.norm(lag, axis=1)))
     if "resting" in truth[0]:
         out["resting_correlation"] = float(
-            np.mean([val.an.correlation(dn[t], truth[t]["blurred"], truth[t]["resting"]) for t in warm])
+            np.mean([an.correlation(dn[t], truth[t]["blurred"], truth[t]["resting"]) for t in warm])
         )
     return out
 
