@@ -272,6 +272,8 @@ _FILE_CASES = {
     "flat-white": ("flat", "WHITE", "as on a white frame"),
     "flat-noise": ("flat", "NOISE", "flat frame"),
     "flat-moved": ("flat", "MOVED", "elemental images sit"),
+    "flat-at-condenser-na-0.12": ("flat", "NA0.12", "condenser NA of about 0.1"),
+    "flat-at-condenser-na-0.2": ("flat", "NA0.2", "condenser NA of about 0.2"),
     "flat-text": ("flat", "hello", "not a readable TIFF"),
     "cal-missing": ("cal", None, "not found"),
     "cal-empty": ("cal", b"", "corrupt calibration JSON"),
@@ -280,6 +282,15 @@ _FILE_CASES = {
     "cal-binary": ("cal", b"\xff\xfe\x00garbage", "corrupt calibration JSON"),
     "cal-deep": ("cal", "[" * 100000 + "]" * 100000, "calibration"),
 }
+
+
+def _flat_at(optics, condenser_na):
+    """A flat of the synthetic series' camera recorded at another condenser NA."""
+    from napari_ssdpc.physics.lattice import Grid
+    from napari_ssdpc.simulation.sample_free import flat_frame
+
+    grid = Grid.nominal(optics, axis_offset_px=(3.7, -2.2), rotation_deg=0.4)  # as tests/conftest.py
+    return flat_frame(optics.replace(condenser_na=condenser_na), grid=grid, rng=np.random.default_rng(3))
 
 
 def _content(base, content, synthetic_series):
@@ -294,6 +305,8 @@ def _content(base, content, synthetic_series):
         "NAN": lambda: np.where(np.arange(flat.size).reshape(flat.shape) % 97 == 0, np.nan, frames[0]).astype("f4"),
         "RAWCOPY": lambda: (base / "raw.tif").read_bytes(),
         "TRUNC": lambda: (base / "raw.tif").read_bytes()[: (base / "raw.tif").stat().st_size // 2],
+        "NA0.12": lambda: _flat_at(optics, 0.12),
+        "NA0.2": lambda: _flat_at(optics, 0.2),
     }
     if isinstance(content, str) and content in special:
         return special[content]()
