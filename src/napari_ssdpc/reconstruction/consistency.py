@@ -27,20 +27,20 @@ __all__ = [
     "EI_SHIFT_TOLERANCE_PX",
     "EXPOSURE_TOLERANCE",
     "MAX_EI_SHIFT_PX",
+    "MISFIT_FLOOR",
     "NA_EXCESS",
     "NA_EXCESS_LIGHT",
     "NA_RATIO",
     "NA_RATIO_FLAT",
     "NA_WARN",
-    "MISFIT_FLOOR",
     "apparent_condenser_na",
     "check_condenser_na",
     "check_ei_shift",
     "check_exposure",
     "check_lit_lenslets",
-    "warn_condenser_na",
     "ei_shift_px",
     "ei_templates",
+    "warn_condenser_na",
 ]
 
 
