@@ -1,11 +1,13 @@
 """The condenser NA measured from a frame's lenslets: a sample that moves the lenslets' light is not
 taken for another condenser NA, a frame at another NA is."""
 
+import warnings
+
 import numpy as np
 import pytest
 from scipy import ndimage
 
-from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.reconstruction import consistency
 from napari_ssdpc.reconstruction.contrast import ViewContrast
 
@@ -16,16 +18,20 @@ def _modulated(flat, amp, rng):
     return np.clip(flat * (1 + amp * field), 0, 4095).astype(np.uint16)
 
 
-def test_sample_content_is_not_taken_for_another_condenser_na(synthetic_series):
+@pytest.mark.parametrize("with_flat", [True, False])
+def test_sample_content_is_not_taken_for_another_condenser_na(synthetic_series, with_flat):
     """Smooth modulations of 30 % move the fitted NA of frames at 0.1 far (up to ~0.146), but the
-    optics' NA still fits them within a small fraction of a lenslet's light: none is refused."""
+    optics' NA still fits them within a small fraction of a lenslet's light: none is refused, and
+    none reported where no flat is given (a raw frame is then the only measure of the NA)."""
     optics, cal, flat, _, _ = synthetic_series
-    views = ViewContrast(optics, cal, flat=flat)
+    views = ViewContrast(optics, cal, flat=flat if with_flat else None)
     rng = np.random.default_rng(5)
     seen = []
     for _ in range(6):
         frame = _modulated(flat, 0.3, rng)
-        views.measure(frame)  # not refused
+        with warnings.catch_warnings():
+            warnings.filterwarnings("error", "(?s).*condenser NA", SsdpcWarning)
+            views.measure(frame)  # neither refused nor reported
         levels, _, _ = views._measure(frame, "frame")
         seen.append(consistency.apparent_condenser_na(levels, cal.lenslets, optics))
     assert max(abs(s.na - 0.1) for s in seen) > 0.01  # the sample did move the fit

@@ -281,11 +281,12 @@ def check_flat(levels, noise: float, optics, name: str = "flat frame", lenslets=
             "record the flat with the lamp on, the condenser at the raw frames' NA and no sample"
         )
     fix = "record the flat at the condenser NA of the raw frames"
-    return _lighting(levels, top, lenslets, optics, name, fix + " (or set condenser_na to the NA of both)", fix, True)
+    fix_both = fix + " (or set condenser_na to the NA of both)"
+    return _lighting(levels, top, lenslets, optics, name, fix_both, fix, flat=True, warn=True)
 
 
 def _lighting(
-    levels, top: float, lenslets, optics, name: str, fix: str, white_fix: str, flat: bool = False
+    levels, top: float, lenslets, optics, name: str, fix: str, white_fix: str, flat: bool, warn: bool
 ) -> float | None:
     """The condenser-NA checks of :mod:`.consistency` and :func:`_white` on a frame's levels; the NA
     they look lit at (None without ``lenslets``).
@@ -294,8 +295,9 @@ def _lighting(
     tell the NAs there apart: it gives the lowest that lights them all, and the optics' NA fits as
     well unless it is clearly lower. Such a frame is first checked for a white frame (named as one);
     a frame whose NA is measurable is first checked for its NA (named with the number). A flat (no
-    sample) is held to the NA closely and reported a few per cent off; a raw frame, whose sample
-    moves its lenslets' light, only refused far off.
+    sample) is held to the NA closely; a raw frame, whose sample moves its lenslets' light, only
+    refused far off. With ``warn``, an NA a few per cent off is reported (the flat; a raw frame
+    when no flat is given).
     """
     seen = None if lenslets is None else consistency.apparent_condenser_na(levels, lenslets, optics)
     looks_open = seen is None or seen[0] >= 0.85 * optics.na
@@ -303,8 +305,8 @@ def _lighting(
         _white(levels, top, optics, name, white_fix)
     if seen is not None:
         consistency.check_condenser_na(seen, optics, name, fix, flat)
-        if flat:
-            consistency.warn_condenser_na(seen, optics, name)
+        if warn:
+            consistency.warn_condenser_na(seen, optics, name, flat)
     if not looks_open:
         _white(levels, top, optics, name, white_fix)
     return None if seen is None else seen[0]
@@ -354,7 +356,7 @@ def check_frame_light(
     fix = "set condenser_na to the NA the frames were recorded at (and record the flat at it)"
     if signal > 5 * noise:
         white_fix = "give a raw frame recorded at that condenser NA, not the white frame"
-        _lighting(levels, signal, lenslets, optics, name, fix, white_fix)
+        _lighting(levels, signal, lenslets, optics, name, fix, white_fix, flat=False, warn=not flat)
     elif lenslets is not None and float(np.max(levels)) > 5 * noise:  # light, but not where the optics put it
         consistency.check_condenser_na(consistency.apparent_condenser_na(levels, lenslets, optics), optics, name, fix)
     if not signal > 5 * noise:

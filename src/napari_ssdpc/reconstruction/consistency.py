@@ -33,6 +33,7 @@ __all__ = [
     "NA_RATIO",
     "NA_RATIO_FLAT",
     "NA_WARN",
+    "NA_WARN_LIGHT",
     "apparent_condenser_na",
     "check_condenser_na",
     "check_ei_shift",
@@ -168,14 +169,17 @@ def check_condenser_na(seen: ApparentNA, optics, name: str, fix: str, flat: bool
 
 
 #: A flat is reported (a warning, the result kept) when its lenslets' light fits an NA that differs
-#: from the optics' by more than this (relative) and fits better (excess above 1: the optics' NA
-#: leaves twice the best one's misfit). On flats at 0.3 with lenslets transmitting 2-5 % unequally
-#: the fit stayed within 0.3-0.8 % of the truth (excess at most 0.6).
-NA_WARN = 0.03
+#: from the optics' by more than ``NA_WARN`` (relative) and fits better (excess above 1: the optics'
+#: NA leaves twice the best one's misfit). On flats at 0.3 with lenslets transmitting 2-5 % unequally
+#: the fit stayed within 0.3-0.8 % of the truth (excess at most 0.6). A raw frame (reported where no
+#: flat is given) must also misfit by ``NA_WARN_LIGHT`` of the brightest lenslet's light squared,
+#: above what a sample's modulation gave (0.009, see :data:`NA_EXCESS`); a frame at 0.315 read as
+#: 0.3 misfits by about 0.07.
+NA_WARN, NA_WARN_LIGHT = 0.03, 0.03
 
 
-def warn_condenser_na(seen: ApparentNA, optics, name: str) -> None:
-    """Report a flat lit at a condenser NA a few per cent off the optics' (where
+def warn_condenser_na(seen: ApparentNA, optics, name: str, flat: bool = True) -> None:
+    """Report a frame lit at a condenser NA a few per cent off the optics' (where
     :func:`check_condenser_na` does not refuse it).
 
     Parameters
@@ -185,10 +189,13 @@ def warn_condenser_na(seen: ApparentNA, optics, name: str) -> None:
     optics : Optics
     name : str
         For the message.
+    flat : bool
+        Whether the frame is a flat (else a raw frame, held to :data:`NA_WARN_LIGHT` too).
     """
-    na_seen, excess, _ = seen
+    na_seen, excess, misfit = seen
     na = float(optics.condenser_na)
-    if excess > 1 and abs(na_seen / na - 1) > NA_WARN:
+    clear = excess > 1 and (flat or excess * misfit > NA_WARN_LIGHT)
+    if clear and abs(na_seen / na - 1) > NA_WARN:
         warnings.warn(
             f"{name}: its lenslets are lit as by a condenser NA of {na_seen:.3f}, the optics say {na:g}: Δn depends "
             f"on it through the transfer functions (5 % off moved a bead's peak Δn by 21 %); set condenser_na to "
