@@ -376,3 +376,27 @@ def test_calibrate_with_a_given_axis(files, sums, cli, tmp_path):
     assert cli(["calibrate", files / "white.tif", "-o", tmp_path / "cal.json", "--axis", "1220.5", "1030.25"])[0] == 0
     d = json.loads((tmp_path / "cal.json").read_text())
     assert d["axis_px"] == [1220.5, 1030.25] and d["kind_evidence"]["axis"] == "given" and d["axis_rms"] is None
+
+
+def test_a_warning_repeated_frame_after_frame_is_shown_once_and_counted(synthetic_series, files, rec_args, tmp_path):
+    """A series recorded at half the flat's exposure warns for every frame; the command line shows
+    the warning once (naming frame 0) and then how many more frames gave it, not one line each."""
+    import subprocess
+    import sys
+
+    import numpy as np
+
+    _, _, _, frames, _ = synthetic_series
+    series = tmp_path / "half.tif"
+    tifffile.imwrite(series, (frames[:4] // 2).astype(np.uint16), photometric="minisblack")
+    args = rec_args(tmp_path / "out.zarr")
+    args[1] = series
+    code = "import sys; from napari_ssdpc.cli.main import main; sys.exit(main(sys.argv[1:]))"
+    run = subprocess.run([sys.executable, "-c", code, *map(str, args)], capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr
+    warned = [
+        ln for ln in run.stderr.splitlines() if ln.startswith("ssdpc: warning:") and "as bright as the flat" in ln
+    ]
+    assert len(warned) == 2, run.stderr
+    assert "half.tif frame 0 is 0.50 x as bright" in warned[0]
+    assert warned[1].startswith("ssdpc: warning: 3 more like ") and "frame 0 is 0.50 x as bright" in warned[1]

@@ -169,8 +169,34 @@ def build_parser():
     return p
 
 
-def _warning_line(message, category, filename, lineno, file=None, line=None):
-    sys.stderr.write(f"ssdpc: warning: {message}\n")
+class _WarningLines:
+    """Shows each warning as one line, and a warning that repeats frame after frame (the same text
+    but for the frame and its numbers) once, with a count of its repeats at the end of the run."""
+
+    def __init__(self):
+        self.repeats: dict[str, list] = {}
+
+    def show(self, message, category, filename, lineno, file=None, line=None):
+        text = " ".join(str(message).split())
+        kind = re.sub(r"\d+(\.\d+)?", "#", text)
+        if kind in self.repeats:
+            self.repeats[kind][1] += 1
+            return
+        self.repeats[kind] = [text, 0]
+        _line(f"ssdpc: warning: {text}")
+
+    def summary(self) -> None:
+        for text, more in self.repeats.values():
+            if more:
+                short = re.sub(r"\S*[\\/]", "", text)[:70]  # folders left out of the paths
+                _line(f"ssdpc: warning: {more} more like '{short}...' (other frames or numbers)")
+
+
+def _line(text: str) -> None:
+    """One line on stderr, on a line of its own above a progress bar that is being drawn."""
+    from tqdm import tqdm
+
+    tqdm.write(text, file=sys.stderr)
 
 
 def main(argv=None) -> int:
@@ -187,33 +213,43 @@ def main(argv=None) -> int:
         0 on success, 2 on an error, 130 when interrupted.
     """
     args = build_parser().parse_args(argv)
-    warnings.showwarning = _warning_line
+    lines = _WarningLines()
+    warnings.showwarning = lines.show
     warnings.simplefilter("always", SsdpcWarning)
+    try:
+        fault = _fault_of(args)
+    except KeyboardInterrupt:
+        lines.summary()
+        sys.stderr.write("ssdpc: interrupted\n")
+        return 130
+    lines.summary()
+    return 0 if fault is None else _error(fault)
+
+
+def _fault_of(args) -> str | None:
+    """Run the command; None, or the one-line message of what went wrong."""
     try:
         args.func(args)
     except SsdpcError as e:
-        return _error(str(e))
-    except KeyboardInterrupt:
-        sys.stderr.write("ssdpc: interrupted\n")
-        return 130
+        return str(e)
     except MemoryError:
-        return _error("out of memory; narrow --z, take a larger --dz or close other programs")
+        return "out of memory; narrow --z, take a larger --dz or close other programs"
     except RecursionError:
-        return _error("an input file is nested too deeply to be read; check the settings and calibration files")
+        return "an input file is nested too deeply to be read; check the settings and calibration files"
     except OSError as e:  # a file-system fault that no check foresaw (full disk, lost mount, ...)
         from napari_ssdpc.files import os_error
 
         full = e.errno is None and "written" in str(e)  # numpy's short write on a full disk
         doing = "writing" if full or e.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS) else "accessing"
-        return _error(str(os_error(e, e.filename or "a file", doing)))
+        return str(os_error(e, e.filename or "a file", doing))
     except Exception as e:  # a fault no check foresaw: still one line; SSDPC_DEBUG=1 shows the traceback
         if os.environ.get("SSDPC_DEBUG"):
             raise
-        return _error(
+        return (
             f"unexpected {type(e).__name__}: {str(e)[:200]}; this is a fault of napari-ssdpc, not of your input: "
             "rerun with SSDPC_DEBUG=1 and report the traceback"
         )
-    return 0
+    return None
 
 
 def _error(message: str) -> int:

@@ -362,7 +362,11 @@ class TvInversion:
             warnings.warn(
                 f"the TV solve did not converge in {report.iterations} iterations (last relative change "
                 f"{last:.2g} > {FAR_FROM_CONVERGED * tol:g}); "
-                "raise tv_iterations",
+                + (
+                    "a frame that starts from the previous one: raise tv.warm_iterations (--tv-warm-iterations)"
+                    if isinstance(warm, TvState)
+                    else "raise tv_iterations"
+                ),
                 SsdpcWarning,
                 stacklevel=2,
             )
