@@ -10,7 +10,7 @@ scattering samples from intensity images", Optica 2019):
 
 1. Köhler illumination (paper Eq. 2, Abbe's method): plane waves U = exp(i2π w·x) from source points
    w_j over the condenser disk |w| ≤ NA_c/λ on a square lattice of their own spacing h
-   (:func:`~napari_ssdpc.physics.waves.kohler_source`); their intensities add. The points are not
+   (:func:`~napari_ssdpc.physics.apertures.kohler_source`); their intensities add. The points are not
    tied to the grid's frequency lattice: a tilted plane wave is carried as its envelope, which is
    periodic for any w.
 2. Multislice through the volume, far side (largest z) first, once per source point: every voxel of
@@ -25,7 +25,7 @@ scattering samples from intensity images", Optica 2019):
    u = w' + lattice frequency of an m x m crop of the exit spectrum around u_k − w_j: one coherent
    image g_jqk per sub-point and lenslet, I_k = Σ_jq s_jqk |g_jqk|². The weights s_jqk give each
    lenslet the part of the disk nearest to each sub-point on the same side of that lenslet's edge
-   (:func:`~napari_ssdpc.physics.waves.lenslet_source_weights`), so every view's bright field has
+   (:func:`~napari_ssdpc.physics.apertures.lenslet_source_weights`), so every view's bright field has
    its exact area. With 0.03 NA between points and q = 3 the views are as close to a converged
    model as with 0.01 NA points alone, 3x cheaper (docs/nonlinear.md).
 4. The band-limited I_k (bandwidth 2ρ) is Fourier-interpolated onto the views' pixels, averaged
@@ -56,8 +56,9 @@ import numpy as np
 import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.physics.apertures import disk_fraction, kohler_source, lenslet_source_weights
 from napari_ssdpc.physics.pupil import eta
-from napari_ssdpc.physics.waves import defocus_factor, disk_fraction, kohler_source, lenslet_source_weights
+from napari_ssdpc.physics.waves import defocus_factor
 from napari_ssdpc.settings.optics import Optics
 
 __all__ = ["ViewsMultislice", "square_roi"]
@@ -134,7 +135,7 @@ class ViewsMultislice:
         multislice; 1: the point alone).
     edge_weights : bool
         Weight the source points per lenslet so that each view's bright-field area is exact
-        (:func:`~napari_ssdpc.physics.waves.lenslet_source_weights`); otherwise every point
+        (:func:`~napari_ssdpc.physics.apertures.lenslet_source_weights`); otherwise every point
         carries its own cell of the disk for every lenslet.
     pixel_integration : bool
         Average the intensity over the sensor pixel (one view pixel), as the camera does.

@@ -22,9 +22,10 @@ import numpy as np
 import scipy.fft as sfft
 from scipy import ndimage
 
+from napari_ssdpc.physics.apertures import disk_fraction, objective_pupil_cells, subaperture_windows
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.physics.pupil import eta
-from napari_ssdpc.physics.waves import defocus_factor, disk_fraction, objective_pupil_cells, subaperture_windows
+from napari_ssdpc.physics.waves import defocus_factor
 from napari_ssdpc.simulation.camera import Camera
 from napari_ssdpc.simulation.multislice import even_fast
 

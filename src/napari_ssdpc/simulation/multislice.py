@@ -23,7 +23,8 @@ import numpy as np
 import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.physics.waves import apply_transfer, kohler_source, propagator
+from napari_ssdpc.physics.apertures import kohler_source
+from napari_ssdpc.physics.waves import apply_transfer, propagator
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation.phantoms import (
     Phantom,
@@ -184,7 +185,7 @@ class Source:
         -------
         tuple of ndarray
             ``(idx, w, weights)``: lattice indices (K, 2), frequencies (K, 2) in cycles/µm and
-            weights (K,) in (cycles/µm)², as :func:`napari_ssdpc.physics.waves.kohler_source` gives them.
+            weights (K,) in (cycles/µm)², as :func:`napari_ssdpc.physics.apertures.kohler_source` gives them.
         """
         return kohler_source(self.radius(optics), sampling.du, int(self.step), int(self.supersample))
 

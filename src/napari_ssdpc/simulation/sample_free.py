@@ -9,8 +9,8 @@ import numpy as np
 import scipy.fft as sfft
 from scipy import special
 
+from napari_ssdpc.physics.apertures import in_subaperture
 from napari_ssdpc.physics.lattice import Grid
-from napari_ssdpc.physics.waves import in_subaperture
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation.camera import Camera
 from napari_ssdpc.simulation.imaging import Imager, array_as_built, crop_size, render

@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from napari_ssdpc.physics.apertures import in_subaperture
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.physics.pupil import mean_tilt
-from napari_ssdpc.physics.waves import in_subaperture
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation.camera import Camera
 from napari_ssdpc.simulation.imaging import Imager, array_as_built, render
