@@ -6,7 +6,8 @@ from scipy.special import j0, j1
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.lattice import Grid
-from napari_ssdpc.physics.psf import LensletPSF, reference_psf
+from napari_ssdpc.physics.psf import LensletPSF
+from napari_ssdpc.physics.psf_reference import reference_psf
 from napari_ssdpc.reconstruction.deconvolution import kernels_to_otf
 from napari_ssdpc.settings.optics import Optics
 

@@ -1,7 +1,8 @@
 from .design import design, design_table, design_warnings
 from .dpc_transfer import dpc_transfer_functions
 from .lattice import Grid, lenslet_case
-from .psf import LensletPSF, reference_psf
+from .psf import LensletPSF
+from .psf_reference import reference_psf
 from .pupil import axial_frequency, eta, mean_tilt, soft_disk, subaperture_pupil
 from .transfer import (
     lenslet_transfer_functions,
