@@ -12,7 +12,7 @@ sensor-sized FFTs here, per-lenslet kernels on the view grid and band-limited sp
 ``deconvolution.MultiViewRL``.
 
 Layout. The fast path treats each view on its own (no light of one lenslet in another EI,
-``core/psf.py``). To compute that same model on a sensor, the EIs are laid out on the lenslet
+``physics/psf.py``). To compute that same model on a sensor, the EIs are laid out on the lenslet
 lattice with a pitch of one convolution window (P, Q) px instead of the physical 145 px, so that
 the blur and parallax margins of neighbouring EIs never overlap. ``canvas='sensor'`` keeps the
 camera's frame size (as large as the toolboxes' FFTs; larger only when the spread lattice does
