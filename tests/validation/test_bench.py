@@ -12,7 +12,8 @@ from napari_ssdpc.reconstruction.reconstructor import Reconstructor
 from napari_ssdpc.validation.bench import run_bench
 from napari_ssdpc.validation.bench_report import format_report
 from napari_ssdpc.validation.cases import Case, run_config
-from napari_ssdpc.validation.reference import layout, max_relative_difference, reconstruct_reference
+from napari_ssdpc.validation.reference import max_relative_difference, reconstruct_reference
+from napari_ssdpc.validation.reference_layout import layout
 
 
 @pytest.fixture(scope="module")
@@ -54,9 +55,9 @@ def test_spread_layout_keeps_every_kernel_and_separates_the_eis(data):
     # light of one lenslet, from anywhere in the object domain, never reaches another lenslet's view
     import scipy.fft as sfft
 
-    from napari_ssdpc.validation.reference import _kernels, full_frame_psf
+    from napari_ssdpc.validation.reference_layout import full_frame_psf, lenslet_kernels
 
-    kernels = np.abs(_kernels(rec, 80.0, lay))
+    kernels = np.abs(lenslet_kernels(rec, 80.0, lay))
     ones = np.ones(lay.fft_shape, np.float32)
     for k in range(len(rec.lenslets)):
         psf = full_frame_psf(kernels, [k], lay)

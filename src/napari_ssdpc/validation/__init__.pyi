@@ -6,6 +6,7 @@ from . import (
     figures,
     metrics,
     reference,
+    reference_layout,
     truth,
 )
 
@@ -17,5 +18,6 @@ __all__ = [
     "figures",
     "metrics",
     "reference",
+    "reference_layout",
     "truth",
 ]

@@ -154,7 +154,7 @@ def reference_stage(rec, res_fast, frame, canvas, fast_full=None) -> dict:
     frame : ndarray, (H, W)
         Raw frame.
     canvas : {'sensor', 'eis'}
-        The reference path's canvas (see :func:`~napari_ssdpc.validation.reference.layout`).
+        The reference path's canvas (see :func:`~napari_ssdpc.validation.reference_layout.layout`).
     fast_full : dict, optional
         The fast path's stage info (from :func:`fast_path`) on the full z grid: the reference's
         frame time is extrapolated to its number of planes.
