@@ -22,9 +22,31 @@ from pathlib import Path
 
 from napari_ssdpc.errors import SsdpcError
 
-__all__ = ["atomic_write", "atomic_write_set", "clean_stale_parts", "os_error", "pid_alive"]
+__all__ = ["atomic_write", "atomic_write_set", "clean_stale_parts", "file_times", "os_error", "pid_alive"]
 
 _PART = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.[^.]+\.part$")
+
+
+def file_times(path: str | Path) -> tuple[int, int, int]:
+    """Bytes, latest modification and latest status change (ns) of a file, or of all the files of a
+    folder (a store): what says whether an input changed, without reading it.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    (int, int, int)
+        Size in bytes, ``st_mtime_ns`` and ``st_ctime_ns`` (the latest of the folder's files).
+    """
+    path = Path(path)
+    files = [p for p in path.rglob("*") if p.is_file()] if path.is_dir() else [path]
+    size = mtime = ctime = 0
+    for p in files:
+        st = p.stat()
+        size, mtime, ctime = size + st.st_size, max(mtime, st.st_mtime_ns), max(ctime, st.st_ctime_ns)
+    return size, mtime, ctime
 
 
 def pid_alive(pid: int) -> bool:

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.files import os_error
+from napari_ssdpc.files import file_times, os_error
 
 __all__ = ["StoredFrames", "PagedSeries"]
 
@@ -86,10 +86,8 @@ class StoredFrames:
             }
         files = sorted(p for p in self.path.rglob("*") if p.is_file()) if self.path.is_dir() else [self.path]
         try:
-            size = mtime = ctime = 0
+            size, mtime, ctime = file_times(self.path)
             for path in files:  # a store's files in a fixed order, names and contents
-                st = path.stat()
-                size, mtime, ctime = size + st.st_size, max(mtime, st.st_mtime_ns), max(ctime, st.st_ctime_ns)
                 h.update(str(path.relative_to(self.path) if path != self.path else "").encode())
                 with open(path, "rb") as f:
                     for block in iter(lambda: f.read(1 << 22), b""):

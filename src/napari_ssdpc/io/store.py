@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.files import glob_escape, os_error, pid_alive
+from napari_ssdpc.files import file_times, glob_escape, os_error, pid_alive
 
 __all__ = [
     "DONE",
@@ -215,17 +215,6 @@ def write_frame(out, t: int, images: dict) -> float:
     return time.perf_counter() - t0
 
 
-def _file_times(path: Path) -> tuple[int, int, int]:
-    """Bytes, latest modification and latest status change (ns) of a file, or of all the files of a
-    folder (a store)."""
-    files = [p for p in path.rglob("*") if p.is_file()] if path.is_dir() else [path]
-    size = mtime = ctime = 0
-    for p in files:
-        st = p.stat()
-        size, mtime, ctime = size + st.st_size, max(mtime, st.st_mtime_ns), max(ctime, st.st_ctime_ns)
-    return size, mtime, ctime
-
-
 def check_input_unchanged(stamp, t: int) -> None:
     """Refuse to mark frame ``t`` done when the store's input file changed since the run began.
 
@@ -254,7 +243,7 @@ def check_input_unchanged(stamp, t: int) -> None:
         return
     path = Path(str(ident.get("path")))
     try:
-        size, mtime, ctime = _file_times(path)
+        size, mtime, ctime = file_times(path)
     except OSError:
         size, mtime, ctime = -1, 0, 0
     if (size, mtime) == (ident["size"], ident["mtime_ns"]) and ctime == ident.get("ctime_ns", ctime):
