@@ -504,9 +504,9 @@ _API_BUILD = {
 
 @pytest.mark.parametrize("case", list(_API_BUILD))
 def test_api_reconstructor_arguments(unchanged, api, case, monkeypatch):
-    from napari_ssdpc.reconstruction import checks
+    from napari_ssdpc.reconstruction import memory
 
-    monkeypatch.setattr(checks, "available_memory", lambda: 8 << 30)  # the same 8 GiB on every machine
+    monkeypatch.setattr(memory, "available_memory", lambda: 8 << 30)  # the same 8 GiB on every machine
     make, words = _API_BUILD[case]
     with pytest.raises(Exception) as e:
         make(api)

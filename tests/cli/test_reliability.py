@@ -17,7 +17,7 @@ import pytest
 import tifffile
 
 from napari_ssdpc.cli.main import build_parser
-from napari_ssdpc.reconstruction import checks
+from napari_ssdpc.reconstruction import checks, memory
 from napari_ssdpc.settings.optics import Optics
 
 PAPER = json.dumps({k: v for k, v in Optics.paper().to_dict().items() if k != "flip_x"}) + "\n"
@@ -191,7 +191,7 @@ def test_9_impossible_sizes_are_refused_before_allocating(files, sums, cli, rec_
     ):
         rc, err = cli(rec_args(tmp_path / "o.ome.tif", *flags))
         assert rc == 2 and words in err, (flags, err)
-    monkeypatch.setattr(checks, "available_memory", lambda: 2 << 30)  # a 2 GiB machine
+    monkeypatch.setattr(memory, "available_memory", lambda: 2 << 30)  # a 2 GiB machine
     rc, err = cli(rec_args(tmp_path / "o.ome.tif", "--z", "-80", "80", "--dz", "0.1"))
     assert rc == 2 and "GiB are free; narrow --z or take a larger --dz (e.g. --dz" in err
     assert not (tmp_path / "o.ome.tif").exists()

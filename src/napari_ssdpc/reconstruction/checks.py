@@ -6,7 +6,8 @@ napari, the series runner and the Python API alike:
 - :func:`check_optics_match`: the optics in use against the calibration's (every field that
   changes the numbers: :data:`OPTICS_FIELDS`) and against the lattice pitch measured on the
   white frame.
-- :func:`check_memory`: an estimate of the operators and outputs against the free memory.
+- :func:`~napari_ssdpc.reconstruction.memory.check_memory` (its own module): an estimate of the
+  operators and outputs against the free memory.
 - :func:`check_flat` and :func:`check_frame_light`: a flat or raw frame without light, all
   saturated, inverted, noise only or white (condenser open) is refused with what is wrong;
   they read the per-lenslet light of views that are extracted once (:mod:`.contrast`).
@@ -14,9 +15,6 @@ napari, the series runner and the Python API alike:
 """
 
 from __future__ import annotations
-
-import math
-import os
 
 import numpy as np
 
@@ -28,16 +26,13 @@ from napari_ssdpc.settings.parts import PART_KEYS
 __all__ = [
     "MAX_DELTA_N",
     "OPTICS_FIELDS",
-    "available_memory",
     "check_constant",
     "check_flat",
     "check_frame_light",
-    "check_memory",
     "check_optics_match",
     "check_result",
     "check_saturated",
     "dark_pixels",
-    "estimate_memory",
 ]
 
 #: |Δn| beyond this is no biological or polymer sample in any medium: a wrong input or setting.
@@ -109,83 +104,6 @@ def check_optics_match(optics, cal, source: str = "--optics") -> None:
 def _key(attr: str) -> str:
     """The optics file's key of a flat attribute (``objective.na`` for ``na``)."""
     return ".".join(PART_KEYS[attr]) if attr in PART_KEYS else attr
-
-
-def available_memory() -> int:
-    """Free memory in bytes (MemAvailable), or the physical memory where that is unknown."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    try:
-        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
-    except (ValueError, OSError, AttributeError):
-        return 1 << 40
-
-
-def estimate_memory(optics, cal, settings, stacks: bool) -> dict:
-    """Bytes the Reconstructor's operators and one frame's outputs will take (an upper estimate).
-
-    Parameters
-    ----------
-    optics : Optics
-    cal : Calibration
-    settings : ReconstructionSettings
-    stacks : bool
-        Whether the Richardson-Lucy stacks are computed.
-
-    Returns
-    -------
-    dict
-        ``planes``, ``lenslets``, ``operators`` and ``outputs`` (bytes) and ``total``.
-    """
-    planes = settings.planes
-    side = 2 * math.ceil(cal.ei_radius_px) + 1
-    view = side * side  # pixels per view
-    k = max(1, len(cal.lenslets))
-    with_rl = stacks
-    # (K x Z x band) complex64 operators: WOTF once, RL per half (each lenslet in two halves)
-    tv = settings.method in ("tv", "multislice")  # the multislice method starts from the tv solution
-    ops = k * planes * (view // 2) * 8 * ((settings.method == "wotf" or tv) + 2 * with_rl)
-    if tv:  # its operator on the padded z grid, and ~12 ADMM work arrays
-        padded = planes + 2 * math.ceil(25.0 / settings.dz_um)
-        ops += k * padded * (view // 2) * 8 + 12 * padded * view * 8
-    if with_rl:  # per half and plane: padded (~1.7x view side) support and normalisation arrays
-        ops += 4 * planes * int(3 * view) * 12
-    outputs = planes * view * 4 * (3 + 6 * with_rl)  # ri, delta_n, phase (+ stacks, dpc, absorption)
-    return {"planes": planes, "lenslets": k, "operators": ops, "outputs": outputs, "total": ops + outputs}
-
-
-def check_memory(optics, cal, settings, stacks: bool, available: int | None = None) -> dict:
-    """Refuse a reconstruction whose operators and outputs do not fit in the free memory.
-
-    Parameters
-    ----------
-    optics, cal, settings, stacks
-        As for :func:`estimate_memory`.
-    available : int, optional
-        Free bytes; default :func:`available_memory`.
-
-    Returns
-    -------
-    dict
-        The estimate.
-    """
-    est = estimate_memory(optics, cal, settings, stacks)
-    free = available_memory() if available is None else int(available)
-    if est["total"] > 0.8 * free:
-        gib = 1 << 30
-        factor = math.ceil(est["total"] / (0.8 * free))
-        raise SsdpcError(
-            f"this reconstruction needs about {est['total'] / gib:.1f} GiB (operators {est['operators'] / gib:.1f} "
-            f"GiB for up to {est['lenslets']} lenslets x {est['planes']} planes, outputs {est['outputs'] / gib:.1f} "
-            f"GiB) but {free / gib:.1f} GiB are free; narrow --z or take a larger --dz "
-            f"(e.g. --dz {settings.dz_um * factor:g})"
-        )
-    return est
 
 
 def dark_pixels(img, cal, step: int = 8) -> np.ndarray:

@@ -24,7 +24,7 @@ import numpy as np
 from napari_ssdpc.calibration.result import Calibration
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.physics.design import design
-from napari_ssdpc.reconstruction import checks
+from napari_ssdpc.reconstruction import checks, memory
 from napari_ssdpc.reconstruction.backend import get_backend
 from napari_ssdpc.reconstruction.contrast import ViewContrast
 from napari_ssdpc.reconstruction.dpc import phase_to_delta_n, refractive_index
@@ -191,7 +191,7 @@ class Reconstructor:
         with_stacks = bool(stacks) or config.outputs.needs_stacks or method.uses_stacks
         checks.check_optics_match(optics, calibration, "optics")
         if check_memory:
-            checks.check_memory(optics, calibration, settings, with_stacks)
+            memory.check_memory(optics, calibration, settings, with_stacks)
         self.dz = float(settings.dz_um)
         self.z_um = z_grid(settings.z_min_um, settings.z_max_um, self.dz)
         self._check_depth_of_field()

@@ -29,7 +29,7 @@ from scipy import ndimage
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.views_multislice import ViewsMultislice, square_roi
-from napari_ssdpc.reconstruction.checks import available_memory
+from napari_ssdpc.reconstruction.memory import available_memory
 from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
 from napari_ssdpc.reconstruction.methods.tv import TvMethod
 from napari_ssdpc.reconstruction.proximal import bounds
