@@ -1,12 +1,15 @@
 """Elementwise proximal steps and constraints of the phase solvers: the box of the sign and bound
-constraints, and the prox of the sparsity with the temporal prior (:mod:`.regularised`; the box
-also in :mod:`.methods.multislice`)."""
+constraints, the prox of the sparsity with the temporal prior, and the two over-relaxed ADMM
+steps of ``tv`` that use them (:mod:`.regularised`; the box also in :mod:`.methods.multislice`)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["bounds", "prox_two_kinks"]
+__all__ = ["RELAX", "bounds", "constraint_step", "gradient_step", "prox_two_kinks"]
+
+#: Over-relaxation of the ADMM splits (1: none; 1.5-1.8 is usual).
+RELAX = 1.6
 
 
 def prox_two_kinks(v, p, mu, gamma, xp=np):
@@ -55,3 +58,84 @@ def bounds(sign, phi_max) -> tuple[float, float]:
     tuple of float
     """
     return (0.0 if sign == "denser" else -phi_max, 0.0 if sign == "lighter" else phi_max)
+
+
+def constraint_step(phi, z2, u2, l1, box, scratch, mask, parts, xp=np, prior=None, gamma=0.0) -> None:
+    """Over-relaxed ADMM step of the constraint split, in place: v = αφ + (1 − α)z₂ + u₂,
+    z₂ = P_C(prox(v)) (the sparsity prox, with a ``prior`` the prox of the sparsity and the
+    temporal prior :func:`prox_two_kinks`, then the sign, bound and field stop) and u₂ = v − z₂.
+
+    Parameters
+    ----------
+    phi, z2, u2 : ndarray, float32, (Z, ny, nx)
+        The phase, the split and its scaled multiplier (rad); ``z2`` and ``u2`` are updated.
+    l1 : float
+        The sparsity threshold μ (rad).
+    box : (float, float)
+        Lower and upper bound of the phase (:func:`bounds`), rad.
+    scratch : ndarray, float32, (Z, ny, nx)
+        Work array, overwritten.
+    mask : ndarray, (ny, nx)
+        The field stop (1 inside).
+    parts : callable
+        ``parts(part)``: runs ``part(slice_of_planes)`` over the planes and sums what it returns.
+    xp : module
+        NumPy or CuPy.
+    prior : ndarray, (Z, ny, nx), optional
+        The previous frame's phase (temporal prior), rad.
+    gamma : float
+        The temporal prior's threshold γ (rad).
+    """
+
+    def part(sl):
+        z, u, s = z2[sl], u2[sl], scratch[sl]
+        z *= np.float32(1 - RELAX)
+        u += z
+        xp.multiply(phi[sl], np.float32(RELAX), out=s)
+        u += s  # u holds v
+        if prior is None:
+            xp.clip(u, -l1, l1, out=z)
+            xp.subtract(u, z, out=z)  # shrink(v, μ)
+        else:
+            z[...] = prox_two_kinks(u, prior[sl], l1, gamma, xp)
+        xp.clip(z, *box, out=z)
+        z *= mask
+        u -= z
+        return 0.0
+
+    parts(part)
+
+
+def gradient_step(g, z1, u1, thresh, parts, xp=np) -> float:
+    """Over-relaxed ADMM step of the gradient split (Boyd et al. 2011, §3.4.3), in place:
+    v = αDφ + (1 − α)z₁ + u₁, z₁ = shrink(v, t) and u₁ = v − z₁ = clip(v, ±t).
+
+    Parameters
+    ----------
+    g : ndarray, float32, (D, Z, ny, nx)
+        Dφ (its D finite-difference components) on entry; overwritten.
+    z1, u1 : ndarray, float32, (D, Z, ny, nx)
+        The split and its scaled multiplier; updated.
+    thresh : float
+        The shrinkage threshold t.
+    parts, xp
+        As for :func:`constraint_step`.
+
+    Returns
+    -------
+    float
+        Σ|Dφ|.
+    """
+
+    def part(sl):
+        gp, zp, up = g[:, sl], z1[:, sl], u1[:, sl]
+        tv = float(abs(gp).sum())
+        gp *= np.float32(RELAX)
+        zp *= np.float32(1 - RELAX)
+        gp += zp
+        gp += up
+        xp.clip(gp, -thresh, thresh, out=up)
+        xp.subtract(gp, up, out=zp)
+        return tv
+
+    return parts(part)

@@ -46,7 +46,7 @@ import scipy.fft as sfft
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.reconstruction.backend import in_threads
 from napari_ssdpc.reconstruction.forward import ViewModel, apply
-from napari_ssdpc.reconstruction.proximal import bounds, prox_two_kinks
+from napari_ssdpc.reconstruction.proximal import bounds, constraint_step, gradient_step
 from napari_ssdpc.reconstruction.tv_report import TvReport
 from napari_ssdpc.settings.reconstruction import SIGNS
 
@@ -58,8 +58,6 @@ __all__ = ["LAMBDA_PER_NOISE", "TvInversion", "TvState"]
 #: (Σ Δn over the field 3 x a weak bead's); 0.1 R_z cuts it 4-fold and keeps the objects within
 #: 4%; 0.02 R_z starts to eat them (−17%).
 SPARSITY_PER_RZ = 0.1
-#: Over-relaxation of the ADMM splits (1: none; 1.5-1.8 is usual).
-RELAX = 1.6
 #: Warn when the last relative change is above this many times the tolerance.
 FAR_FROM_CONVERGED = 5.0
 #: Iterations of each sign's probe solve when the sign is 'auto'.
@@ -327,19 +325,22 @@ class TvInversion:
             change = float(xp.linalg.norm(new - phi)) / max(float(xp.linalg.norm(new)), 1e-12)
             phi = new
             self._grad(phi, out=g)
-            tv = self._update_gradients(g, z1, u1, thresh)
+            tv = gradient_step(g, z1, u1, thresh, self._parts, xp)
             l1_sum = float(abs(phi).sum())
             if prior is not None:
                 l1_sum += temporal_weight * float(abs(phi - prior).sum())
             penalty = lam_abs * (tv + l1_sum / self.sparsity_um)
             report.objective.append(0.5 * self._data(fwd, band) + penalty * cell)
-            self._update_constraints(
+            constraint_step(
                 phi,
                 z2,
                 u2,
                 l1,
                 bounds(sign, phi_max),
-                scratch=g[0],
+                g[0],
+                self._mask,
+                self._parts,
+                xp,
                 prior=prior,
                 gamma=l1 * np.float32(temporal_weight),
             )
@@ -417,49 +418,3 @@ class TvInversion:
         """Σ ``part(planes)``: one part per core on the CPU (NumPy releases the GIL), the whole
         volume at once on a GPU."""
         return part(slice(None)) if self.bk.is_gpu else sum(in_threads(part, self.nz))
-
-    def _update_constraints(self, phi, z2, u2, l1, bounds, scratch, prior=None, gamma=0.0) -> None:
-        """Over-relaxed ADMM step of the constraint split, in place: v = αφ + (1 − α)z₂ + u₂,
-        z₂ = P_C(prox(v)) (the sparsity prox, with a ``prior`` the prox of the sparsity and the
-        temporal prior :func:`prox_two_kinks`, then the sign, bound and field stop) and
-        u₂ = v − z₂. ``scratch`` (the shape of φ) is overwritten."""
-        xp, mask = self.xp, self._mask
-
-        def part(sl):
-            z, u, s = z2[sl], u2[sl], scratch[sl]
-            z *= np.float32(1 - RELAX)
-            u += z
-            xp.multiply(phi[sl], np.float32(RELAX), out=s)
-            u += s  # u holds v
-            if prior is None:
-                xp.clip(u, -l1, l1, out=z)
-                xp.subtract(u, z, out=z)  # shrink(v, μ)
-            else:
-                z[...] = prox_two_kinks(u, prior[sl], l1, gamma, xp)
-            xp.clip(z, *bounds, out=z)
-            z *= mask
-            u -= z
-            return 0.0
-
-        self._parts(part)
-
-    def _update_gradients(self, g, z1, u1, thresh) -> float:
-        """Over-relaxed ADMM step of the gradient split (Boyd et al. 2011, §3.4.3), in place:
-        v = αDφ + (1 − α)z₁ + u₁, z₁ = shrink(v, t) and u₁ = v − z₁ = clip(v, ±t). Returns Σ|Dφ|.
-
-        ``g`` holds Dφ on entry and is overwritten.
-        """
-        xp = self.xp
-
-        def part(sl):
-            gp, zp, up = g[:, sl], z1[:, sl], u1[:, sl]
-            tv = float(abs(gp).sum())
-            gp *= np.float32(RELAX)
-            zp *= np.float32(1 - RELAX)
-            gp += zp
-            gp += up
-            xp.clip(gp, -thresh, thresh, out=up)
-            xp.subtract(gp, up, out=zp)
-            return tv
-
-        return self._parts(part)
