@@ -7,7 +7,8 @@ import pytest
 
 from napari_ssdpc.physics.lattice import lenslet_case
 from napari_ssdpc.reconstruction.forward import ViewModel, padded_planes
-from napari_ssdpc.reconstruction.regularised import PROBE, TvInversion
+from napari_ssdpc.reconstruction.regularised import TvInversion
+from napari_ssdpc.reconstruction.sign_probes import PROBE
 from napari_ssdpc.settings.optics import Optics
 
 

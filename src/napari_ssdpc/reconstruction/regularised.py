@@ -47,6 +47,7 @@ from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.reconstruction.backend import in_threads
 from napari_ssdpc.reconstruction.forward import ViewModel, apply
 from napari_ssdpc.reconstruction.proximal import bounds, constraint_step, gradient_step
+from napari_ssdpc.reconstruction.sign_probes import solve_with_auto_sign
 from napari_ssdpc.reconstruction.tv_report import TvReport
 from napari_ssdpc.settings.reconstruction import SIGNS
 
@@ -60,8 +61,6 @@ __all__ = ["LAMBDA_PER_NOISE", "TvInversion", "TvState"]
 SPARSITY_PER_RZ = 0.1
 #: Warn when the last relative change is above this many times the tolerance.
 FAR_FROM_CONVERGED = 5.0
-#: Iterations of each sign's probe solve when the sign is 'auto'.
-PROBE = 12
 
 #: λ in units of the measured noise times the data operator's strength (docs/method.md).
 LAMBDA_PER_NOISE = 1.0
@@ -278,7 +277,7 @@ class TvInversion:
         if isinstance(warm, TvState) and sign == "auto":
             sign = warm.sign
         if sign == "auto":
-            return self._auto_sign(contrast, warm, phi_max, lam, iterations, tol, progress, should_stop)
+            return solve_with_auto_sign(self, contrast, warm, phi_max, lam, iterations, tol, progress, should_stop)
         spec = self.model.full_spectra(contrast)
         sigma = self._noise(spec)
         band = self.model.take(spec)  # (P, K)
@@ -372,44 +371,6 @@ class TvInversion:
                 stacklevel=2,
             )
         return self.bk.to_host(out[self.planes]), report
-
-    def _auto_sign(self, contrast, warm, phi_max, lam, iterations, tol, progress, should_stop):
-        """The sign the data support: a short solve with each, the lower objective wins. Progress
-        counts against ``iterations`` (the chosen sign's path: its probe, then the rest), each
-        probe labelled; both probes stop with ``should_stop``."""
-
-        total = max(iterations, PROBE + 1)
-
-        def report_as(label, offset=0):
-            return None if progress is None else (lambda i, n, *_: progress(offset + i, total, label))
-
-        kw = dict(warm=warm, phi_max=phi_max, lam=lam, iterations=PROBE, tol=0.0, quiet=True, should_stop=should_stop)
-        probes = {
-            s: self.phase(contrast, sign=s, progress=report_as(f"TV: probing the sign ({s})"), **kw)
-            for s in ("denser", "lighter")
-        }
-        if should_stop is not None and should_stop():  # cancelled while probing: the estimate so far
-            return probes["denser"]
-        best = min(probes, key=lambda s: probes[s][1].objective[-1])
-        other = "lighter" if best == "denser" else "denser"
-        phi, report = self.phase(
-            contrast,
-            warm=probes[best][0],
-            sign=best,
-            phi_max=phi_max,
-            lam=lam,
-            iterations=max(iterations - PROBE, 1),
-            tol=tol,
-            progress=report_as(f"TV ({best})", PROBE),
-            should_stop=should_stop,
-        )
-        report.sign_objectives = {s: probes[s][1].objective[-1] for s in probes}
-        report.objective = probes[best][1].objective + report.objective
-        report.relative_change = probes[best][1].relative_change + report.relative_change
-        report.iterations += PROBE  # the chosen sign's path; the other probe ran PROBE more
-        report.sign = f"auto: {best} (objective {report.sign_objectives[best]:.4g} vs {other} "
-        report.sign += f"{report.sign_objectives[other]:.4g})"
-        return phi, report
 
     def _project(self, phi, sign, phi_max):
         return self.xp.clip(phi, *bounds(sign, phi_max)) * self._mask
