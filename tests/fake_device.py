@@ -16,7 +16,7 @@ import numpy as np
 import scipy.fft
 from numpy.lib.mixins import NDArrayOperatorsMixin
 
-from napari_ssdpc.reconstruction.backend import Backend
+from napari_ssdpc.backend import Backend
 
 __all__ = ["DeviceArray", "fake_gpu"]
 

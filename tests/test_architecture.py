@@ -247,3 +247,13 @@ def test_every_phase_method_is_registered_and_implements_the_interface():
         assert name in ReconstructionSettings.model_fields, f"no settings section '{name}'"
     modules = {p.stem for p in (PKG / "reconstruction" / "methods").glob("*.py")} - {"__init__", "base"}
     assert modules == {e.module.rsplit(".", 1)[1] for e in METHODS.values()}, "a method module is not registered"
+
+
+@pytest.mark.parametrize("path", [p for p in MODULES if p.name != "backend.py"], ids=lambda p: str(p.relative_to(PKG)))
+def test_fourier_transforms_go_through_the_backend(path):
+    """One FFT entry (``napari_ssdpc.backend``): a transform called straight from SciPy or NumPy
+    would run on one core or not on the GPU; helpers such as ``fftfreq`` and ``next_fast_len`` are fine."""
+    import re
+
+    direct = re.findall(r"\b(?:sfft|scipy\.fft|np\.fft|numpy\.fft)\.(i?r?fftn?2?)\(", path.read_text())
+    assert not direct, f"{path.relative_to(PKG)} calls {sorted(set(direct))} directly; use a Backend (bk.fft2, cpu().rfft2)"

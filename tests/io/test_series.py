@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import tifffile
 
+from napari_ssdpc.backend import gpu_available
 from napari_ssdpc.cli.main import main
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.frame_source import PagedSeries, StoredFrames
@@ -19,7 +20,6 @@ from napari_ssdpc.io.store import done_frames
 from napari_ssdpc.pipeline.job import Job
 from napari_ssdpc.pipeline.run import Pipeline
 from napari_ssdpc.pipeline.sinks import ZarrSink
-from napari_ssdpc.reconstruction.backend import gpu_available
 from napari_ssdpc.reconstruction.reconstructor import Reconstructor
 from napari_ssdpc.validation.cases import run_config
 

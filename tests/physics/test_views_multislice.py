@@ -128,6 +128,29 @@ def test_gradient_matches_finite_differences(optics, refine, substeps):
     np.testing.assert_allclose(model.misfit(dn, data, weight)[1], grad, rtol=1e-10, atol=1e-12 * np.abs(grad).max())
 
 
+def test_the_model_runs_on_a_device_backend_with_the_same_numbers(optics):
+    """Every array and FFT of the model and its gradient goes through its backend: on a device
+    that refuses host arrays (CuPy's rules, NumPy's numbers) the views and the gradient are the CPU's."""
+    from fake_device import fake_gpu
+
+    x = _grid(optics, 16)
+    lenslets = _lit(optics, 16)[::3]
+    kw = dict(source_spacing_na=0.1, chunk=5)
+    cpu_model = ViewsMultislice(optics, lenslets, x, x, [-2.0, 0.0, 2.0], **kw)
+    bk = fake_gpu()
+    dev_model = ViewsMultislice(optics, lenslets, x, x, [-2.0, 0.0, 2.0], backend=bk, **kw)
+    rng = np.random.default_rng(5)
+    dn = (0.03 * rng.standard_normal(cpu_model.shape)).astype(np.float32)
+    data = (1 + 0.1 * rng.standard_normal(cpu_model.view_shape)).astype(np.float32)
+    np.testing.assert_allclose(dev_model.i0, cpu_model.i0, rtol=1e-6)
+    np.testing.assert_allclose(bk.to_host(dev_model.views(bk.asarray(dn))), cpu_model.views(dn), rtol=1e-5, atol=1e-6)
+    v_cpu, g_cpu = cpu_model.misfit(dn, data)
+    v_dev, g_dev = dev_model.misfit(bk.asarray(dn), bk.asarray(data))
+    assert v_dev == pytest.approx(v_cpu, rel=1e-5)
+    np.testing.assert_allclose(bk.to_host(g_dev), g_cpu, rtol=1e-4, atol=1e-5 * np.abs(g_cpu).max())
+    assert g_cpu.dtype == np.float32  # complex64 fields give float32 gradients
+
+
 # ------------------------------------------------------------------------- weak-object limit
 def test_weak_object_limit_is_the_first_order_model(optics):
     """A bead of Δn 5e-4 (0.04 rad) 6 µm behind the focal plane: the multislice views' contrast is

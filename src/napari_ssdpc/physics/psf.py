@@ -36,6 +36,7 @@ import math
 import numpy as np
 import scipy.fft as sfft
 
+from napari_ssdpc.backend import cpu
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.pupil import axial_frequency, mean_tilt, subaperture_pupil
 from napari_ssdpc.settings.optics import Optics
@@ -204,7 +205,7 @@ class LensletPSF:
         box = self._pupil * (np.cos(theta) + 1j * np.sin(theta)) * ramp_y[:, :, None] * ramp_x[:, None, :]
         q = np.zeros((len(box), self._n, self._n), np.complex64)
         q[:, self._box[:, None], self._box[None, :]] = box
-        h = sfft.ifft2(q, workers=-1) * self._deapodise  # amplitude PSF x pixel²
+        h = cpu().ifft2(q) * self._deapodise  # amplitude PSF x pixel²
         inten = (h.real**2 + h.imag**2) / (self.pixel_um**2 * math.pi * self.optics.subaperture_radius**2)
         sup = self.support_px
         idx = np.arange(sup) - sup // 2
@@ -244,7 +245,7 @@ class LensletPSF:
         pad = np.zeros((len(b), p, qn), np.float32)
         idx = np.arange(sup) - sup // 2  # blur centre -> index 0
         pad[:, (idx % p)[:, None], (idx % qn)[None, :]] = b
-        otf = sfft.rfft2(pad, workers=-1)
+        otf = cpu().rfft2(pad)
         t = self.shift_um(z) / self.pixel_um - self.offsets_px  # shift of the blur, px (x, y)
         fy, fx = sfft.fftfreq(p), sfft.rfftfreq(qn)
         ramp_y = np.exp(-2j * np.pi * fy[None, :] * t[:, 1, None])
@@ -275,7 +276,7 @@ class LensletPSF:
             sfft.next_fast_len(int(h + self.support_px + 2 * math.ceil(t[1])), real=True),
             sfft.next_fast_len(int(w + self.support_px + 2 * math.ceil(t[0])), real=True),
         )
-        full = sfft.irfft2(self._otf_one(float(z), fft_shape), s=fft_shape, workers=-1)
+        full = cpu().irfft2(self._otf_one(float(z), fft_shape), s=fft_shape)
         iy = (np.arange(h) - h // 2) % fft_shape[0]
         ix = (np.arange(w) - w // 2) % fft_shape[1]
         return np.ascontiguousarray(full[:, iy[:, None], ix[None, :]], dtype=np.float32)

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.fft as sfft
 
+from napari_ssdpc.backend import cpu
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.physics.pupil import axial_frequency, soft_disk
@@ -149,12 +150,10 @@ def reference_psf(
     images = np.empty((len(z), npx, npx))
     for i, zi in enumerate(z):
         u = field0 * np.exp(2j * np.pi * zi * eta)
-        u = sfft.ifft2(sfft.fft2(u, workers=-1) * prop, workers=-1)
+        u = cpu().ifft2(cpu().fft2(u) * prop)
         inten = np.abs(u) ** 2
         if pixel_integration:
-            inten = sfft.irfft2(
-                sfft.rfft2(inten, workers=-1) * box[:, None] * box[None, : n // 2 + 1], s=(n, n), workers=-1
-            )
+            inten = cpu().irfft2(cpu().rfft2(inten) * box[:, None] * box[None, : n // 2 + 1], s=(n, n))
         images[i] = inten[q // 2 :: q, q // 2 :: q][:npx, :npx] * scale
         if progress is not None:
             progress(i + 1, len(z))

@@ -33,6 +33,7 @@ import math
 import numpy as np
 import scipy.fft as sfft
 
+from napari_ssdpc.backend import cpu
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.pupil import axial_frequency, soft_disk, subaperture_pupil
 from napari_ssdpc.settings.optics import Optics
@@ -90,7 +91,7 @@ def weak_object_transfer_functions(source, pupil, z_um=0.0, eta=None, out_shape=
     for z in zs:
         q = p_pad if z == 0 else p_pad * np.exp(2j * np.pi * z * eta_pad)
         # W(m) = Σ_j S_j Q_{j+m} Q*_j = IFFT[conj(FFT(S·Q)) · FFT(Q)]
-        w = sfft.ifft2(np.conj(sfft.fft2(s_pad * q, workers=-1)) * sfft.fft2(q, workers=-1), workers=-1) / norm
+        w = cpu().ifft2(np.conj(cpu().fft2(s_pad * q)) * cpu().fft2(q)) / norm
         w_pos = w[..., (iy % pad[0])[:, None], (ix % pad[1])[None, :]]
         w_neg = np.conj(w[..., (-iy % pad[0])[:, None], (-ix % pad[1])[None, :]])
         h_abs.append((w_pos + w_neg).astype(np.complex64))

@@ -44,7 +44,8 @@ back-propagated by hand through the intensity, the filters, the propagation and 
 With u_i the field just after screen i and G_i its gradient (∂L/∂u_i* x 2):
 ∂L/∂Δn_i = (2π δ / λ) Σ_j Im(u_i* G_i), and G_{i−1} = H_δ* ⊛ (t_i* G_i).
 
-Arrays live in the module ``xp`` (NumPy by default, or CuPy); FFTs are unnormalised forward.
+Arrays live on the model's :class:`~napari_ssdpc.backend.Backend` (NumPy by default, or CuPy on a
+GPU), in complex64 / float32 unless asked otherwise; FFTs are unnormalised forward.
 Frequencies are in cycles/µm, lengths in µm.
 """
 
@@ -55,6 +56,7 @@ import math
 import numpy as np
 import scipy.fft as sfft
 
+from napari_ssdpc.backend import Backend, get_backend
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.apertures import disk_fraction, kohler_source, lenslet_source_weights
 from napari_ssdpc.physics.pupil import eta
@@ -143,8 +145,8 @@ class ViewsMultislice:
         Source points propagated at a time (memory: ``chunk`` x (side·refine)² fields per slab).
     dtype : numpy dtype
         Complex dtype of the fields (complex64; complex128 for gradient checks).
-    xp : module, optional
-        Array module (``numpy`` by default, or ``cupy``); inputs and outputs live there.
+    backend : {'cpu', 'gpu'} or Backend, optional
+        Where the fields live and the FFTs run (default the CPU); inputs and outputs live there.
     memory_mb : float
         Largest memory for the fields kept between the forward and the backward pass; beyond it
         the backward pass recomputes them (a third propagation).
@@ -189,11 +191,12 @@ class ViewsMultislice:
         pixel_integration: bool = True,
         chunk: int = 32,
         dtype=np.complex64,
-        xp=None,
+        backend: str | Backend | None = None,
         memory_mb: float = 2048.0,
         max_bytes: int | None = None,
     ):
-        self.xp = np if xp is None else xp
+        self.bk = get_backend(backend)
+        self.xp = self.bk.xp
         self.cdtype = np.dtype(dtype)
         self.rdtype = np.finfo(self.cdtype).dtype
         lam, nm = optics.wavelength_um, optics.medium_index
@@ -284,7 +287,7 @@ class ViewsMultislice:
         self._pix = xp_.asarray((pix[:, None] * pix[None, :]).astype(self.rdtype))
         self._kernels: list | None = None
         i0 = self._interpolate(self._intensity(None)[0])  # sample-free views: constant per lenslet
-        self.i0 = np.asarray(_host(xp_, i0.mean(axis=(1, 2))), float)
+        self.i0 = np.asarray(self.bk.to_host(i0.mean(axis=(1, 2))), float)
         if np.any(self.i0 <= 1e-6 * self.i0.max()):
             dark = np.flatnonzero(self.i0 <= 1e-6 * self.i0.max()).tolist()
             raise SsdpcError(
@@ -303,13 +306,6 @@ class ViewsMultislice:
         kernels = pairs if pairs <= self.memory_mb * 2**18 else 0
         temporaries = self.chunk * (4 * q * lenslets * m * m + 6 * n * n) * c
         return int(fields + pairs + kernels + 3 * s * n * n * c + temporaries)
-
-    # ------------------------------------------------------------------------------- FFTs
-    def _fft2(self, a):
-        return sfft.fft2(a, workers=-1) if self.xp is np else self.xp.fft.fft2(a)
-
-    def _ifft2(self, a):
-        return sfft.ifft2(a, workers=-1) if self.xp is np else self.xp.fft.ifft2(a)
 
     # --------------------------------------------------------------------------- forward
     def _screens(self, dn):
@@ -356,12 +352,12 @@ class ViewsMultislice:
             u = xp.ones((s, self.n, self.n), self.cdtype)
             for i in range(len(screens) * self.substeps):
                 if i:
-                    u = self._ifft2(self._fft2(u) * self._h[sl])  # one slab of medium (Eq. 6)
+                    u = self.bk.ifft2(self.bk.fft2(u) * self._h[sl])  # one slab of medium (Eq. 6)
                 u = u * screens[i // self.substeps]
                 if keep:
                     kept.append(u)
-            spec = self._fft2(u)
-        g = self._ifft2(spec[self._gather(sl)][:, None] * self._pair_kernel(sl))  # (s, Q, K, m, m)
+            spec = self.bk.fft2(u)
+        g = self.bk.ifft2(spec[self._gather(sl)][:, None] * self._pair_kernel(sl))  # (s, Q, K, m, m)
         return g.astype(self.cdtype, copy=False), kept
 
     def _intensity(self, screens, keep: bool = False):
@@ -377,16 +373,16 @@ class ViewsMultislice:
     def _interpolate(self, im):
         """E: (K, m, m) intensity on the crop grid -> (K, nv, nv) on the views' pixels."""
         xp, nv, m = self.xp, self.nv, self.m
-        spec = self._fft2(im) * self._pix
+        spec = self.bk.fft2(im) * self._pix
         out = xp.zeros((im.shape[0], nv, nv), spec.dtype)
         out[:, self._band[:, None], self._band[None, :]] = spec
-        return (self._ifft2(out).real * (nv * nv / (m * m))).astype(self.rdtype)
+        return (self.bk.ifft2(out).real * (nv * nv / (m * m))).astype(self.rdtype)
 
     def _interpolate_adjoint(self, grad):
         """Eᵀ: (K, nv, nv) -> (K, m, m), the exact transpose of :meth:`_interpolate`."""
         nv, m = self.nv, self.m
-        spec = self._fft2(grad)[:, self._band[:, None], self._band[None, :]] / (nv * nv)
-        return (self._ifft2(spec * self._pix).real * (m * m) * (nv * nv / (m * m))).astype(self.rdtype)
+        spec = self.bk.fft2(grad)[:, self._band[:, None], self._band[None, :]] / (nv * nv)
+        return (self.bk.ifft2(spec * self._pix).real * (m * m) * (nv * nv / (m * m))).astype(self.rdtype)
 
     def views(self, dn):
         """The flat-fielded views I_k / I0_k of a Δn volume on the ROI.
@@ -460,21 +456,17 @@ class ViewsMultislice:
         xp, n, s = self.xp, self.n, sl.stop - sl.start
         # I = Σ s_jk |g|²: ∂L/∂g* x 2 = 2 s_jk (∂L/∂I) g; g = ifft_m(crop · F): its adjoint is fft_m / m²
         gg = (2 * self._wgt[sl][..., None, None]) * g_i[None, None] * g
-        gc = (self._fft2(gg) * xp.conj(self._pair_kernel(sl))).sum(axis=1) / (self.m * self.m)
+        gc = (self.bk.fft2(gg) * xp.conj(self._pair_kernel(sl))).sum(axis=1) / (self.m * self.m)
         j, r, c = self._gather(sl)
         flat = ((j * n + r) * n + c).ravel()
         spec = xp.bincount(flat, weights=gc.real.ravel(), minlength=s * n * n) + 1j * xp.bincount(
             flat, weights=gc.imag.ravel(), minlength=s * n * n
         )
         spec = spec.reshape(s, n, n).astype(self.cdtype)
-        gu = self._ifft2(spec) * (n * n)  # fftᴴ = n² ifft
+        gu = self.bk.ifft2(spec) * (n * n)  # fftᴴ = n² ifft
         for i in range(len(kept) - 1, -1, -1):
             # u_i = t_i · p_i: ∂L/∂Δn_i = κ Im(u_i* G_i); G_{i−1} = H* ⊛ (t_i* G_i)
             grad[i] += self.kappa * xp.sum(xp.imag(xp.conj(kept[i]) * gu), axis=0)
             if i:
-                gu = self._ifft2(self._fft2(xp.conj(screens[i // self.substeps]) * gu) * xp.conj(self._h[sl]))
+                gu = self.bk.ifft2(self.bk.fft2(xp.conj(screens[i // self.substeps]) * gu) * xp.conj(self._h[sl]))
 
-
-def _host(xp, a):
-    """A NumPy copy of an array of ``xp``."""
-    return a.get() if hasattr(a, "get") and xp is not np else np.asarray(a)

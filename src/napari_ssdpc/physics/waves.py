@@ -14,8 +14,8 @@ Frequencies are in cycles/µm, distances in µm; lattice arrays are in FFT order
 from __future__ import annotations
 
 import numpy as np
-import scipy.fft as sfft
 
+from napari_ssdpc.backend import cpu
 from napari_ssdpc.physics.pupil import eta
 
 __all__ = ["apply_transfer", "defocus_factor", "propagate", "propagator", "transfer_function"]
@@ -135,7 +135,7 @@ def apply_transfer(field, h) -> np.ndarray:
     ndarray, complex, (..., ny, nx)
         The filtered field(s).
     """
-    return sfft.ifft2(sfft.fft2(field, workers=-1) * h, workers=-1)
+    return cpu().ifft2(cpu().fft2(field) * h)
 
 
 def propagate(field, d_um: float, dx_um: float, wavelength_um: float, n_medium: float, tilt=(0.0, 0.0)):

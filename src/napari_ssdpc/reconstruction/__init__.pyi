@@ -1,4 +1,3 @@
-from .backend import get_backend
 from .methods import METHODS, method_class
 from .methods.base import PhaseMethod, Setup, Solution
 from .reconstructor import Reconstructor, Result
@@ -16,6 +15,5 @@ __all__ = [
     "TvInversion",
     "TvReport",
     "WotfInversion",
-    "get_backend",
     "method_class",
 ]

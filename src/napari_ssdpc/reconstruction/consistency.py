@@ -19,6 +19,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.fft as sfft
 
+from napari_ssdpc.backend import cpu
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.settings.lenslets import circle_overlap_fraction
 
@@ -237,7 +238,7 @@ def ei_templates(cal, lit) -> tuple[int, list]:
             continue  # at the sensor's edge
         disk = (np.hypot(xx - (cx - ix), yy - (cy - iy)) <= r).astype(float)
         n = sfft.next_fast_len(2 * h + 1, real=True)
-        out.append((ix, iy, np.conj(sfft.rfft2(disk - disk.mean(), s=(n, n)))))
+        out.append((ix, iy, np.conj(cpu().rfft2(disk - disk.mean(), s=(n, n)))))
     return h, out
 
 
@@ -269,7 +270,7 @@ def ei_shift_px(img, templates) -> tuple[float, float]:
     for ix, iy, spec in items:
         win = np.asarray(img[iy - h : iy + h + 1, ix - h : ix + h + 1], float)
         w = win - win.mean()
-        acc += sfft.irfft2(sfft.rfft2(w, s=(n, n)) * spec, s=(n, n)) / max(float(w.std()), 1e-12)
+        acc += cpu().irfft2(cpu().rfft2(w, s=(n, n)) * spec, s=(n, n)) / max(float(w.std()), 1e-12)
     m = MAX_EI_SHIFT_PX
     near = np.roll(acc, (m, m), axis=(0, 1))[: 2 * m + 1, : 2 * m + 1]  # shifts −m..m
     py, px = np.unravel_index(int(np.argmax(near)), near.shape)

@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.fft as sfft
 
+from napari_ssdpc.backend import cpu, get_backend
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.reconstruction.backend import get_backend
 
 
 def padded_shape(view_shape, kernel_shape):
@@ -40,7 +40,7 @@ def padded_shape(view_shape, kernel_shape):
     return tuple(sfft.next_fast_len(int(a + b - 1), real=True) for a, b in zip(view_shape, kernel_shape))
 
 
-def kernels_to_otf(kernels, fft_shape, workers=-1):
+def kernels_to_otf(kernels, fft_shape):
     """OTFs (K, Z, P, Q//2+1) of centred kernels (K, Z, kh, kw), rfft over the last two axes.
 
     Parameters
@@ -49,8 +49,6 @@ def kernels_to_otf(kernels, fft_shape, workers=-1):
         Centred kernels.
     fft_shape : (int, int)
         (P, Q).
-    workers : int
-        FFT threads.
 
     Returns
     -------
@@ -61,7 +59,7 @@ def kernels_to_otf(kernels, fft_shape, workers=-1):
     pad = np.zeros(kernels.shape[:-2] + tuple(fft_shape), np.float32)
     pad[..., :kh, :kw] = kernels
     pad = np.roll(pad, (-(kh // 2), -(kw // 2)), axis=(-2, -1))  # kernel centre -> index 0
-    return sfft.rfft2(pad, workers=workers).astype(np.complex64)
+    return cpu().rfft2(pad).astype(np.complex64)
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,8 @@ Arrays may carry leading axes (e.g. z): the 2D FFTs act on the last two axes.
 from __future__ import annotations
 
 import numpy as np
-import scipy.fft as sfft
+
+from napari_ssdpc.backend import cpu
 
 
 def dpc_image(i1, i2, eps: float = 1e-6, background=None):
@@ -34,7 +35,7 @@ def dpc_image(i1, i2, eps: float = 1e-6, background=None):
     return (i1 - i2) / np.maximum(den, eps)
 
 
-def tikhonov_phase(dpc, h_phase, alpha: float, workers: int = -1):
+def tikhonov_phase(dpc, h_phase, alpha: float):
     """Least-squares phase from DPC images with Tikhonov regularisation, paper Eq. 7.
 
     ``dpc``: sequence of DPC images (..., ny, nx), one per axis j.
@@ -48,8 +49,6 @@ def tikhonov_phase(dpc, h_phase, alpha: float, workers: int = -1):
     h_phase : sequence of ndarray, complex
     alpha : float
         Regularisation α (paper Eq. 7).
-    workers : int
-        FFT threads.
 
     Returns
     -------
@@ -59,9 +58,9 @@ def tikhonov_phase(dpc, h_phase, alpha: float, workers: int = -1):
     num = 0
     den = alpha
     for img, h in zip(dpc, h_phase):
-        num = num + np.conj(h) * sfft.fft2(img, workers=workers)
+        num = num + np.conj(h) * cpu().fft2(img)
         den = den + np.abs(h) ** 2
-    return sfft.ifft2(num / den, workers=workers).real.astype(np.float32)
+    return cpu().ifft2(num / den).real.astype(np.float32)
 
 
 def phase_to_delta_n(phase, wavelength_um: float, dz_um: float):

@@ -12,7 +12,7 @@ box the model is a K x Z matrix A_p; the operator stores all of them as one (P, 
 array, so every sum over planes or views is one batched matrix product (``@``, NumPy or CuPy) over
 contiguous memory. Both phase methods (:mod:`.wotf` and :mod:`.regularised`) use one instance,
 built once per optics, lenslets, view grid and z grid. It is built on the host and then lives
-on the device of its :class:`~napari_ssdpc.reconstruction.backend.Backend` (NumPy or CuPy), as do
+on the device of its :class:`~napari_ssdpc.backend.Backend` (NumPy or CuPy), as do
 the arrays its methods return; the inversions copy their results back with ``bk.to_host``.
 
 The views are weighted by w_k = √(I0_k / max I0): the normalised contrast of a dim view is
@@ -27,9 +27,9 @@ import math
 import numpy as np
 import scipy.fft as sfft
 
+from napari_ssdpc.backend import Backend, get_backend
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics import transfer
-from napari_ssdpc.reconstruction.backend import Backend, get_backend
 from napari_ssdpc.reconstruction.deconvolution import Band
 from napari_ssdpc.settings.optics import Optics
 

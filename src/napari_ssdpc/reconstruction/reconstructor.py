@@ -21,11 +21,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from napari_ssdpc.backend import get_backend
 from napari_ssdpc.calibration.result import Calibration
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.physics.design import design
 from napari_ssdpc.reconstruction import checks, memory
-from napari_ssdpc.reconstruction.backend import get_backend
 from napari_ssdpc.reconstruction.contrast import ViewContrast
 from napari_ssdpc.reconstruction.dpc import phase_to_delta_n, refractive_index
 from napari_ssdpc.reconstruction.methods import method_class

@@ -23,7 +23,7 @@ diagonal and the data term is K x Z per lateral frequency, so with the Woodbury 
 frequency costs one K x K product (the inverses are built once, like the Tikhonov operators).
 Because φ is real, everything runs on the half spectrum of a real 3D FFT, and the products are
 batched over the band's frequencies (``@`` on contiguous (P, K, Z) arrays). Every array lives on
-the model's device (:mod:`.backend`: NumPy on the CPU, CuPy on a GPU); only the views come in and
+the model's device (:mod:`napari_ssdpc.backend`: NumPy on the CPU, CuPy on a GPU); only the views come in and
 the phase goes out.
 
 The z grid is padded by about one axial resolution length on each side (:func:`padded_planes`).
@@ -43,8 +43,8 @@ from typing import Any
 import numpy as np
 import scipy.fft as sfft
 
+from napari_ssdpc.backend import in_threads
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
-from napari_ssdpc.reconstruction.backend import in_threads
 from napari_ssdpc.reconstruction.forward import ViewModel, apply
 from napari_ssdpc.reconstruction.proximal import bounds, constraint_step, gradient_step
 from napari_ssdpc.reconstruction.sign_probes import solve_with_auto_sign

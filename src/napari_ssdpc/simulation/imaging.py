@@ -19,9 +19,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.fft as sfft
 from scipy import ndimage
 
+from napari_ssdpc.backend import cpu
 from napari_ssdpc.physics.apertures import disk_fraction, objective_pupil_cells, subaperture_windows
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.physics.pupil import eta
@@ -79,7 +79,7 @@ class Imager:
         n = sampling.n
         x = sampling.x()
         self.mask = disk_fraction(x[None, :], x[:, None], optics.field_radius_um, sampling.dx_um).astype(np.float32)
-        self.mask_spec = sfft.fft2(self.mask.astype(np.complex64), workers=-1)
+        self.mask_spec = cpu().fft2(self.mask.astype(np.complex64))
         u = sampling.u()
         u2 = u[None, :] ** 2 + u[:, None] ** 2
         # objective pupil before the iris, absolute lattice in FFT order: every cell that touches the
@@ -109,13 +109,13 @@ class Imager:
         if getattr(self, "_z", None) != z_exit:  # exp(i2π z η(u)) P_obj(u) on the absolute lattice (Eq. 6)
             self._z = z_exit
             self._prop = (defocus_factor(self.eta, z_exit) * self.pupil).astype(np.complex64)
-        F = sfft.fft2(v_full, workers=-1)
+        F = cpu().fft2(v_full)
         e0 = self.eta[idx[1] % n, idx[0] % n].real
         F *= np.roll(self._prop, (-int(idx[1]), -int(idx[0])), axis=(0, 1))  # index i -> u_i + w
         F *= np.complex64(np.exp(-2j * np.pi * z_exit * e0))
-        img = sfft.ifft2(F, workers=-1, overwrite_x=True)
+        img = cpu().ifft2(F)
         img *= self.mask
-        return sfft.fft2(img, workers=-1, overwrite_x=True)
+        return cpu().fft2(img)
 
     def empty_spectrum(self, idx):
         """Spectrum after the iris of an unperturbed plane wave (no sample).
@@ -149,7 +149,7 @@ class Imager:
         rows = (self.centres[:, 1, None] - idx[1] + self.off[None, :]) % n
         cols = (self.centres[:, 0, None] - idx[0] + self.off[None, :]) % n
         crops = spec[rows[:, :, None], cols[:, None, :]] * self.apert
-        f = sfft.ifft2(crops, axes=(-2, -1), workers=-1)
+        f = cpu().ifft2(crops)
         self.acc += (weight * self.scale) * (f.real**2 + f.imag**2)
 
     def sum_sources(self, idx, weights, spectrum, progress=None):
@@ -185,7 +185,7 @@ class Imager:
         ndarray, complex, (K, nc, nc)
             Coefficients at the frequencies ``fftfreq(nc, size_um / nc)`` cycles/µm, intensity unit.
         """
-        return sfft.fft2(self.acc, axes=(-2, -1), workers=-1) / self.nc**2
+        return cpu().fft2(self.acc) / self.nc**2
 
 
 # ------------------------------------------------------------------------------ render

@@ -9,6 +9,7 @@ import numpy as np
 import scipy.fft as sfft
 from scipy import special
 
+from napari_ssdpc.backend import cpu
 from napari_ssdpc.physics.apertures import in_subaperture
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.settings.optics import Optics
@@ -73,7 +74,7 @@ def _incoherent_otf(u_k, optics, du, nc, q=4):
     sx, sy = u_k[0] + t[None, :], u_k[1] + t[:, None]
     a = in_subaperture(sx, sy, u_k, rho, cut).astype(float)
     N = sfft.next_fast_len(2 * len(t) + 1)
-    ac = sfft.ifft2(np.abs(sfft.fft2(a, s=(N, N), workers=-1)) ** 2, workers=-1).real
+    ac = cpu().ifft2(np.abs(cpu().fft2(a, s=(N, N))) ** 2).real
     lag = (np.fft.fftfreq(nc, 1.0 / nc).astype(int) * q) % N
     otf = ac[np.ix_(lag, lag)]
     return otf / ac[0, 0]

@@ -175,8 +175,8 @@ def run_bench(
     dict
         ``machine``, ``device``, ``quick``, ``case``, ``rss_before_mb``, ``stages`` and ``targets``.
     """
+    from napari_ssdpc.backend import get_backend
     from napari_ssdpc.calibration import calibrate
-    from napari_ssdpc.reconstruction.backend import get_backend
 
     get_backend(device)  # a missing GPU stops here, before any work
     say = log or (lambda m: None)

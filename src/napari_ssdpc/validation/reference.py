@@ -21,8 +21,8 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.fft as sfft
 
+from napari_ssdpc.backend import cpu
 from napari_ssdpc.reconstruction.deconvolution import RLResult
 from napari_ssdpc.reconstruction.dpc import phase_to_delta_n
 from napari_ssdpc.reconstruction.stacks import Stacks
@@ -53,7 +53,7 @@ class ReferenceRL:
         self.otf = np.empty((self.z, lay.shape[0], lay.shape[1] // 2 + 1), np.complex64)
         for i, z in enumerate(rec.z_um):
             ker = lenslet_kernels(rec, z, lay) if kernels is None else kernels[i]
-            self.otf[i] = sfft.rfft2(full_frame_psf(ker, self.members, lay), workers=-1)
+            self.otf[i] = cpu().rfft2(full_frame_psf(ker, self.members, lay))
             if progress is not None:
                 progress(i + 1, self.z)
         self.mask = self.place(self.view_mask[self.members])
@@ -107,10 +107,10 @@ class ReferenceRL:
         """
         acc = np.zeros_like(self.otf[0])
         for i in range(self.z):
-            spec = sfft.rfft2(obj[i], s=self.lay.shape, workers=-1)
+            spec = cpu().rfft2(obj[i], s=self.lay.shape)
             spec *= self.otf[i]
             acc += spec
-        return sfft.irfft2(acc, s=self.lay.shape, workers=-1)
+        return cpu().irfft2(acc, s=self.lay.shape)
 
     def adjoint(self, img):
         """PSF_z ⋆ img over the whole canvas for every plane: canvas -> (Z, P, Q) linear.
@@ -124,13 +124,13 @@ class ReferenceRL:
         ndarray, float32, (Z, P, Q)
             Linear grid.
         """
-        spec = sfft.rfft2(img, workers=-1)
+        spec = cpu().rfft2(img)
         p, q = self.lay.fft_shape
         out = np.empty((self.z, p, q), np.float32)
         for i in range(self.z):
             prod = np.conj(self.otf[i])
             prod *= spec
-            out[i] = sfft.irfft2(prod, s=self.lay.shape, workers=-1)[:p, :q]
+            out[i] = cpu().irfft2(prod, s=self.lay.shape)[:p, :q]
         return out
 
     def run(self, views, iterations: int) -> RLResult:

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.fft as sfft
 
+from napari_ssdpc.backend import cpu
 from napari_ssdpc.errors import SsdpcError
 
 __all__ = ["CANVASES", "Layout", "full_frame_psf", "layout", "lenslet_kernels"]
@@ -162,7 +163,7 @@ def lenslet_kernels(rec, z, lay: Layout):
         Fraction of one lenslet's light per pixel.
     """
     ops = rec.stacks
-    full = sfft.irfft2(ops.psf.otf(float(z), ops.fft_shape), s=ops.fft_shape, workers=-1)
+    full = cpu().irfft2(ops.psf.otf(float(z), ops.fft_shape), s=ops.fft_shape)
     ry, rx = lay.reach
     full = np.roll(full, (ry, rx), axis=(-2, -1))
     return full[:, : 2 * ry + 1, : 2 * rx + 1]

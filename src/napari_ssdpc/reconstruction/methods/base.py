@@ -8,8 +8,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from napari_ssdpc.backend import Backend
 from napari_ssdpc.errors import Cancelled
-from napari_ssdpc.reconstruction.backend import Backend
 from napari_ssdpc.reconstruction.contrast import ViewContrast
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.settings.reconstruction import ReconstructionSettings

@@ -1,13 +1,15 @@
 """Array backend: NumPy on the CPU (default), CuPy on a CUDA GPU when asked and present.
 
-The reconstruction code takes a :class:`Backend` and writes ``bk.xp`` where it would write ``np``
-and ``bk.rfft2(...)`` where it would write ``scipy.fft.rfft2(...)``; the same lines then run on
-either device. Arrays made by ``bk.xp`` stay on the device until ``bk.to_host`` copies them back,
-so the Richardson–Lucy iterations never leave the GPU.
+The foundation every computing layer stands on (physics, calibration, reconstruction, simulation):
+code takes a :class:`Backend` and writes ``bk.xp`` where it would write ``np`` and ``bk.fft2(...)``
+where it would write ``scipy.fft.fft2(...)``; the same lines then run on either device. This module
+is the one FFT entry of the package: on the CPU every transform runs on all cores
+(:func:`cpu` for code that only ever runs there). Arrays made by ``bk.xp`` stay on the device
+until ``bk.to_host`` copies them back, so the iterations of a solver never leave the GPU.
 
     bk = get_backend("gpu")        # SsdpcError with the fix when CuPy or a GPU is missing
     a = bk.asarray(views)          # host -> device (a no-op on the CPU)
-    spec = bk.rfft2(a)             # scipy.fft (threads) or cupyx.scipy.fft (cuFFT)
+    spec = bk.rfft2(a)             # scipy.fft (all cores) or cupyx.scipy.fft (cuFFT)
     out = bk.to_host(spec)         # device -> host (a no-op on the CPU)
 """
 
@@ -23,6 +25,8 @@ from typing import Any
 import numpy as np
 
 from napari_ssdpc.errors import SsdpcError
+
+__all__ = ["DEVICES", "GPU_INSTALL", "Backend", "cpu", "get_backend", "gpu_available", "in_threads"]
 
 DEVICES = ("cpu", "gpu")
 GPU_INSTALL = "pip install 'napari-ssdpc[gpu]' (CuPy for CUDA 12)"
@@ -119,6 +123,38 @@ class Backend:
         """
         return self.fft.irfft2(a, s=s, **self._kw(norm))
 
+    def fft2(self, a, s=None, norm=None):
+        """Complex 2D FFT over the last two axes (threaded on the CPU).
+
+        Parameters
+        ----------
+        a : ndarray, (..., P, Q)
+        s : (int, int), optional
+            Padded shape.
+        norm : {None, 'ortho'}
+
+        Returns
+        -------
+        ndarray, complex, (..., P, Q) or (..., *s)
+        """
+        return self.fft.fft2(a, s=s, **self._kw(norm))
+
+    def ifft2(self, a, s=None, norm=None):
+        """Inverse of :meth:`fft2`.
+
+        Parameters
+        ----------
+        a : ndarray, complex, (..., P, Q)
+        s : (int, int), optional
+            Output shape.
+        norm : {None, 'ortho'}
+
+        Returns
+        -------
+        ndarray, complex
+        """
+        return self.fft.ifft2(a, s=s, **self._kw(norm))
+
     def rfftn(self, a, norm=None):
         """Real FFT over every axis.
 
@@ -213,6 +249,7 @@ class Backend:
         return self.fft.ifft(a, n=n, axis=axis, **self._kw(norm))
 
 
+@functools.cache
 def _cpu(workers=-1) -> Backend:
     import platform
 
@@ -268,6 +305,16 @@ def get_backend(device: str | Backend | None = "cpu", workers: int = -1) -> Back
     if device not in DEVICES:
         raise SsdpcError(f"unknown device '{device}'; use one of {', '.join(DEVICES)}")
     return _gpu() if device == "gpu" else _cpu(workers)
+
+
+def cpu() -> Backend:
+    """The CPU backend (NumPy, SciPy's FFTs on all cores): for code that only ever runs there.
+
+    Returns
+    -------
+    Backend
+    """
+    return _cpu(-1)
 
 
 def gpu_available() -> bool:

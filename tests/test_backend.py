@@ -7,9 +7,9 @@ import types
 import numpy as np
 import pytest
 
+from napari_ssdpc import backend
+from napari_ssdpc.backend import get_backend, gpu_available
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.reconstruction import backend
-from napari_ssdpc.reconstruction.backend import get_backend, gpu_available
 from napari_ssdpc.reconstruction.deconvolution import Band, MultiViewRL
 from napari_ssdpc.reconstruction.reconstructor import Reconstructor
 from napari_ssdpc.settings.config import RunConfig
