@@ -256,4 +256,6 @@ def test_fourier_transforms_go_through_the_backend(path):
     import re
 
     direct = re.findall(r"\b(?:sfft|scipy\.fft|np\.fft|numpy\.fft)\.(i?r?fftn?2?)\(", path.read_text())
-    assert not direct, f"{path.relative_to(PKG)} calls {sorted(set(direct))} directly; use a Backend (bk.fft2, cpu().rfft2)"
+    assert not direct, (
+        f"{path.relative_to(PKG)} calls {sorted(set(direct))} directly; use a Backend (bk.fft2, cpu().rfft2)"
+    )

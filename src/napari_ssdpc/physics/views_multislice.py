@@ -469,4 +469,3 @@ class ViewsMultislice:
             grad[i] += self.kappa * xp.sum(xp.imag(xp.conj(kept[i]) * gu), axis=0)
             if i:
                 gu = self.bk.ifft2(self.bk.fft2(xp.conj(screens[i // self.substeps]) * gu) * xp.conj(self._h[sl]))
-

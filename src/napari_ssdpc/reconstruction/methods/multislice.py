@@ -10,10 +10,11 @@ lenslet's sub-aperture, flat-fielded) are fitted to the measured views,
 
     minimise  ½ Σ_k ‖W (I_k(Δn) / I0_k − m_k)‖² + μ TV_ε(Δn)   subject to  Δn ∈ C
 
-with C the sign, the bound and the field stop of 'tv', by accelerated projected gradient (FISTA
-with backtracking and a restart when the misfit rises: Beck and Teboulle, SIAM J. Imaging Sci.
-2009; O'Donoghue and Candès 2015), the gradient by the model's adjoint, as in multislice / beam
-propagation tomography (Kamilov et al., IEEE TCI 2016; Chowdhury et al., Optica 2019). The model
+with C the sign, the bound and the field stop of 'tv', by the one nonlinear solver of the package
+(:func:`~napari_ssdpc.reconstruction.nonlinear.projected_gradient`: accelerated projected gradient
+with backtracking and restart, on the setup's backend in float32), the gradient by the model's
+adjoint, as in multislice / beam propagation tomography (Kamilov et al., IEEE TCI 2016; Chowdhury
+et al., Optica 2019). The model
 covers a square region around the objects of the 'tv' solution (their footprint plus a margin for
 the light they scatter) and the planes that hold them (plus a margin): the first-order tails along
 z, which no object explains, are left out; outside the region the 'tv' solution is kept.
@@ -32,7 +33,9 @@ from napari_ssdpc.physics.views_multislice import ViewsMultislice, square_roi
 from napari_ssdpc.reconstruction.memory import available_memory
 from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
 from napari_ssdpc.reconstruction.methods.tv import TvMethod
+from napari_ssdpc.reconstruction.nonlinear import Fit, Unknowns, projected_gradient
 from napari_ssdpc.reconstruction.proximal import bounds
+from napari_ssdpc.reconstruction.regularised import TvState
 
 __all__ = ["MultisliceMethod", "object_windows", "objects_roi"]
 
@@ -145,26 +148,11 @@ def _roi_of(box_um, x_um, y_um):
     return square_roi(x_um, y_um, ((x0 + x1) / 2, (y0 + y1) / 2), max(x1 - x0, y1 - y0))
 
 
-def _tv_smooth(x, voxel, eps):
-    """TV_ε = Σ sqrt(|Dx|² + ε²) and its gradient Σ_a D_aᵀ (D_a x / sqrt(...)), same shape as x.
-
-    D_a: forward differences per µm along axis a, 0 at the last index (no wrap-around).
-    """
-    diffs = [np.diff(x, axis=a, append=np.take(x, [-1], axis=a)) / h for a, h in enumerate(voxel)]
-    norm = np.sqrt(sum(d * d for d in diffs) + eps * eps)
-    out = np.zeros_like(x)
-    for a, (d, h) in enumerate(zip(diffs, voxel)):
-        q = np.moveaxis(d / norm, a, 0)
-        o = np.moveaxis(out, a, 0)  # a view: D_aᵀ q = (q_{i-1} − q_i) / h
-        o -= q / h
-        o[1:] += q[:-1] / h
-    return float(norm.sum()), out
-
-
-def _sign_of(report: dict, sign: str) -> str:
-    """The sign the 'tv' start used ('auto' resolved: its report says 'auto: lighter (...)')."""
-    chosen = str(report.get("tv_sign", sign))
-    return chosen.split(":")[1].split()[0] if chosen.startswith("auto:") else chosen
+def _sign_of(start: Solution) -> str:
+    """The sign the 'tv' start solved with ('auto' resolved), from its end state."""
+    if not isinstance(start.state, TvState):
+        raise TypeError("the multislice refinement starts from a 'tv' solution with its end state")
+    return start.state.sign
 
 
 class MultisliceMethod(PhaseMethod):
@@ -181,11 +169,11 @@ class MultisliceMethod(PhaseMethod):
 
     def _solve(self, views, stacks, warm, progress, should_stop):
         s, v = self.setup, self.setup.views
-        ms = s.settings.multislice
+        ms, bk = s.settings.multislice, s.backend
         start = self.tv.solve(views, warm=warm, progress=progress, should_stop=should_stop)
-        lam, dz = s.optics.wavelength_um, s.dz_um
-        to_dn = lam / (2 * math.pi * dz)  # Δn = λφ/(2π dz)
-        dn = np.asarray(start.phase, np.float64) * to_dn
+        t0 = time.perf_counter()
+        to_dn = s.optics.wavelength_um / (2 * math.pi * s.dz_um)  # Δn = λφ/(2π dz)
+        dn = np.asarray(start.phase, np.float32) * to_dn
         if ms.roi_um is not None:
             rows, cols = _roi_of(ms.roi_um, v.x_um, v.y_um)
         else:
@@ -194,148 +182,96 @@ class MultisliceMethod(PhaseMethod):
         window = object_windows(dn[:, rows, cols], s.z_um, px, ms.z_margin_um)
         on = np.flatnonzero(window.any(axis=(1, 2)))
         planes = slice(int(on[0]), int(on[-1]) + 1)
-        t0 = time.perf_counter()
-
-        def make(planes):
-            return ViewsMultislice(
-                s.optics,
-                v.lenslets,
-                v.x_um,
-                v.y_um,
-                s.z_um[planes],
-                roi=(rows, cols),
-                refine=ms.refine,
-                substeps=ms.substeps,
-                source_subsamples=ms.source_subsamples,
-                dz_um=dz,
-                source_spacing_na=ms.source_spacing_na,
-                max_bytes=available_memory(),
-            )
-
-        everything = make(slice(0, len(s.z_um)))
-        measured = everything.crop(views).astype(np.float64)
-        weight = everything.crop(np.asarray(v.view_mask, np.float64))
-        lo, hi = bounds(_sign_of(start.report, s.settings.tv.sign), s.settings.tv.dn_max)  # in Δn
-        inside = np.asarray(v.mask[rows, cols], bool)[None]
+        everything = self._model(slice(0, len(s.z_um)), rows, cols)
+        measured = bk.asarray(everything.crop(views), np.float32)
+        weight = bk.asarray(everything.crop(np.asarray(v.view_mask, np.float32)))
         noise = float(start.report.get("tv_noise", float("nan")))
-        mu = ms.tv_weight * (noise if math.isfinite(noise) else 0.0)
-        voxel = (dz, px, px)
-
-        k = ms.refine  # the unknowns stay on the views' grid; the model samples each pixel k x k
-
-        def fine(x):
-            return np.repeat(np.repeat(x, k, axis=1), k, axis=2)
-
-        def coarse_sum(g):
-            z, ny, nx = g.shape
-            return g.reshape(z, ny // k, k, nx // k, k).sum(axis=(2, 4))
-
-        # the unknowns' grid: the views' (each pixel k x k in the model) or the model's own
-        grid = {"up": fine, "down": coarse_sum, "inside": inside, "voxel": voxel}
-
-        def project(x):
-            return np.clip(x, lo, hi) * grid["inside"]
-
-        def objective(x, with_grad=True):
-            if with_grad:
-                f, g = model.misfit(grid["up"](x), measured, weight)
-                g = grid["down"](np.asarray(g, np.float64))
-            else:
-                r = (np.asarray(model.views(grid["up"](x)), np.float64) - measured) * np.sqrt(weight)
-                f, g = 0.5 * float(np.sum(r * r)), None
-            if mu > 0:
-                t, gt = _tv_smooth(x, grid["voxel"], 1e-4)
-                f += mu * t
-                g = None if g is None else g + mu * gt
-            return f, g
-
-        n_data = max(float(weight.sum()), 1.0)
-        contrast = float(np.sum(weight * (measured - 1.0) ** 2)) / n_data  # the views' mean squared contrast
+        noise = noise if math.isfinite(noise) else 0.0
+        n_data = max(float(bk.xp.sum(weight)), 1.0)
+        contrast = float(bk.xp.sum(weight * (measured - 1.0) ** 2)) / n_data  # the views' mean squared contrast
         # the discrepancy principle: a fit closer than the noise and the model's own error fits them
         # (the model's error is a share of the views' contrast: larger for a stronger object)
         stop = ms.stop_residual_over_noise + (ms.model_error**2 * contrast / noise**2 if noise > 0 else 0.0)
-        enough = 0.5 * n_data * noise**2 * stop if noise > 0 else 0.0
+        enough = 0.5 * n_data * noise**2 * stop
+        lo, hi = bounds(_sign_of(start), s.settings.tv.dn_max)  # in Δn
+        inside = np.asarray(v.mask[rows, cols], np.float32)[None]
 
-        def residual(x_model, x):
-            return (np.asarray(x_model.views(grid["up"](x)), np.float64) - measured) * np.sqrt(weight)
+        def fit_on(model, fine: bool) -> Fit:
+            k = ms.refine
+            unknowns = Unknowns(1 if fine else k, bk.xp)
+            ins = np.repeat(np.repeat(inside, k, axis=1), k, axis=2) if fine else inside
+            voxel = (s.dz_um, px / k, px / k) if fine else (s.dz_um, px, px)
+            mu = ms.tv_weight * noise
+            return Fit(model, measured, weight, unknowns, lo, hi, bk.asarray(ins), mu, voxel)
 
-        def report(x_model, res, history, converged):
+        def report(fit: Fit, model: ViewsMultislice, x, history, converged):
+            res = fit.residual(x)
+            sq = float(bk.xp.sum(res * res))
             return {
                 **start.report,
                 "multislice_iterations_run": len(history["relative_change"]),
                 "multislice_converged": converged,
                 "multislice_objective_start": history["objective"][0],
                 "multislice_objective_final": history["objective"][-1],
-                "multislice_residual_rms": math.sqrt(float(np.sum(res * res)) / n_data),
-                "multislice_residual_over_noise": float(np.sum(res * res)) / n_data / noise**2 if noise > 0 else None,
+                "multislice_residual_rms": math.sqrt(sq / n_data),
+                "multislice_residual_over_noise": sq / n_data / noise**2 if noise > 0 else None,
                 "multislice_contrast_over_noise": contrast / noise**2 if noise > 0 else None,
                 "multislice_stop_over_noise": stop,
                 "multislice_roi_px": [rows.start, rows.stop, cols.start, cols.stop],
-                "multislice_z_um": [float(x_model.z_um[0]), float(x_model.z_um[-1])],
-                "multislice_source_points": [x_model.n_sources, x_model.n_subsources],
+                "multislice_z_um": [float(model.z_um[0]), float(model.z_um[-1])],
+                "multislice_source_points": [model.n_sources, model.n_subsources],
                 "multislice_seconds": time.perf_counter() - t0,
+                "multislice_device": bk.name,
             }
 
         # a start the model explains as it is (a weak object) is kept whole, tails of the missing cone
         # included: cutting them would only lose the mass they carry
-        whole = project(dn[:, rows, cols])
-        r = residual(everything, whole)
-        if 0.5 * float(np.sum(r * r)) <= enough:
-            f0 = 0.5 * float(np.sum(r * r))
-            kept = report(everything, r, {"objective": [f0], "relative_change": []}, True)
+        whole_fit = fit_on(everything, fine=False)
+        whole = whole_fit.project(bk.asarray(dn[:, rows, cols]))
+        r = whole_fit.residual(whole)
+        f0 = 0.5 * float(bk.xp.sum(r * r))
+        if f0 <= enough:
+            kept = report(whole_fit, everything, whole, {"objective": [f0], "relative_change": []}, True)
             return Solution(start.phase, kept, {**start.history, "multislice": {"objective": [f0]}}, state=start.state)
-        model = make(planes)
-        x = project(np.where(window[planes], dn[planes, rows, cols], 0.0))  # the objects, not their tails
-        if ms.unknowns == "model":  # sub-pixel edges: each view pixel's k x k model samples are free
-            same = lambda a: a
-            grid.update(up=same, down=same, inside=fine(inside), voxel=(dz, px / k, px / k))
-            x = fine(x)
-        f, g = objective(x)
-        history = {"objective": [f], "relative_change": []}
-        step = 0.1 * max(float(np.abs(x).max()), 1e-3) / max(float(np.abs(g).max()), 1e-30)
-        y, fy, gy, t_k, converged = x, f, g, 1.0, False
-        for it in range(ms.iterations):
-            if should_stop is not None and should_stop():
-                break
-            if f <= enough:
-                converged = True
-                break
-            while True:  # backtracking on the quadratic upper bound at y
-                x_new = project(y - step * gy)
-                d = x_new - y
-                f_new, _ = objective(x_new, with_grad=False)
-                if f_new <= fy + float(np.sum(gy * d)) + float(np.sum(d * d)) / (2 * step) or step < 1e-30:
-                    break
-                step *= 0.5
-            if not math.isfinite(f_new):  # never hand on nonsense
-                raise SsdpcError(
-                    f"the multislice fit diverged at iteration {it + 1} (misfit {f:.4g}, then {f_new}); nothing "
-                    "was written: reconstruct with 'tv', or with a smaller source_spacing_na"
-                )
-            change = float(np.linalg.norm(x_new - x)) / max(float(np.linalg.norm(x_new)), 1e-30)
-            if f_new > f:  # the misfit rose: restart the momentum from the last point
-                t_k, y = 1.0, x
-                fy, gy = objective(y)
-                history["relative_change"].append(0.0)
-                continue
-            t_next = (1 + math.sqrt(1 + 4 * t_k * t_k)) / 2
-            y = x_new + ((t_k - 1) / t_next) * (x_new - x)
-            x, f, t_k = x_new, f_new, t_next
-            fy, gy = objective(y)
-            step *= 1.5  # let the step grow back
-            history["objective"].append(f)
-            history["relative_change"].append(change)
-            if progress is not None:
-                progress(it + 1, ms.iterations, "multislice")
-            if change < TOLERANCE and it > 2:
-                converged = True
-                break
+        fine = ms.unknowns == "model"  # sub-pixel edges: each view pixel's k x k model samples are free
+        model = self._model(planes, rows, cols)
+        fit = fit_on(model, fine)
+        x0 = bk.asarray(np.where(window[planes], dn[planes, rows, cols], 0.0).astype(np.float32))  # no tails
+        result = projected_gradient(
+            fit,
+            Unknowns(ms.refine, bk.xp).up(x0) if fine else x0,
+            iterations=ms.iterations,
+            tolerance=TOLERANCE,
+            enough=enough,
+            progress=progress,
+            should_stop=should_stop,
+            label="multislice",
+        )
+        x = Unknowns(ms.refine, bk.xp).down(result.x) / ms.refine**2 if fine else result.x  # the views' grid
         dn[:, rows, cols] = 0.0  # the model holds the objects: the first-order tails are gone
-        out_x = coarse_sum(x) / k**2 if ms.unknowns == "model" else x  # back on the views' grid
-        dn[planes, rows, cols] = out_x
-        phase = (dn / to_dn).astype(np.float32)
-        out = report(model, residual(model, x), history, converged)
-        return Solution(phase, out, {**start.history, "multislice": history}, state=start.state)
+        dn[planes, rows, cols] = bk.to_host(x)
+        out = report(fit, model, result.x, result.history, result.converged)
+        history = {**start.history, "multislice": result.history}
+        return Solution((dn / to_dn).astype(np.float32), out, history, state=start.state)
+
+    def _model(self, planes: slice, rows: slice, cols: slice) -> ViewsMultislice:
+        """The multislice model of the views on ``planes`` of the output grid and the region (rows, cols)."""
+        s, v, ms = self.setup, self.setup.views, self.setup.settings.multislice
+        return ViewsMultislice(
+            s.optics,
+            v.lenslets,
+            v.x_um,
+            v.y_um,
+            s.z_um[planes],
+            roi=(rows, cols),
+            refine=ms.refine,
+            substeps=ms.substeps,
+            source_subsamples=ms.source_subsamples,
+            dz_um=s.dz_um,
+            source_spacing_na=ms.source_spacing_na,
+            max_bytes=available_memory(),
+            backend=s.backend,
+        )
 
     def settings(self) -> dict:
         """The Tikhonov α of the 'tv' start."""
