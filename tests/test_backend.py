@@ -160,7 +160,7 @@ def _tv_on(device):
     yy, xx = np.mgrid[:64, :64]
     mask = np.hypot(yy - 32, xx - 32) < 30
     zs, planes = padded_planes(np.arange(-10.0, 10.1, 2.0), 20.0)
-    model = ViewModel(optics, lenslets, (64, 64), 0.8456, zs, backend=device)
+    model = ViewModel.for_lenslets(optics, lenslets, (64, 64), 0.8456, zs, backend=device)
     rng = np.random.default_rng(0)
     c = (rng.normal(0, 1e-2, (model.n_views, 64, 64)) * mask).astype(np.float32)
     c[:, 28:36, 30:38] += 0.05  # something for the solve to find

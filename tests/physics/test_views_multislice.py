@@ -33,7 +33,7 @@ def _lit(optics, n, min_light=0.05):
 
 def _first_order(optics, lenslets, n, z, dz, dn):
     """The contrast of the first-order model (paper Eqs. 2-4) of a Δn volume on the views' grid."""
-    vm = ViewModel(optics, lenslets, (n, n), optics.object_pixel_um, z)
+    vm = ViewModel.for_lenslets(optics, lenslets, (n, n), optics.object_pixel_um, z)
     phi = (2 * math.pi * dz / optics.wavelength_um * dn).astype(np.float32)  # phase per slab, rad
     band = vm.take(vm.bk.rfft2(phi, norm="ortho"))
     return vm.images(vm.forward(band)) / vm.w[:, None, None]
@@ -215,7 +215,7 @@ def test_views_match_the_simulator(optics, phantom, dz, refine, ms_max, fo_min):
     data, mask = model.crop(views), model.crop(contrast.view_mask)
     signal = np.where(mask, data - 1, 0)
     err_ms = _rel(np.where(mask, model.views(dn) - 1, 0), signal)
-    vm = ViewModel(
+    vm = ViewModel.for_lenslets(
         optics, contrast.lenslets, contrast.mask.shape, contrast.pixel_um, z, i0=contrast.level[contrast.lit]
     )
     phi = np.stack(

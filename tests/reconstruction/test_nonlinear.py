@@ -109,3 +109,35 @@ def test_smoothed_tv_gradient_matches_finite_differences():
         h = 1e-6
         fd = (smoothed_tv(x + h * e, voxel, 0.1, np)[0] - smoothed_tv(x - h * e, voxel, 0.1, np)[0]) / (2 * h)
         assert np.sum(grad * e) == pytest.approx(fd, rel=1e-5)
+
+
+def test_a_view_model_is_built_from_any_transfer_functions():
+    """ViewModel takes the TransferFunctions protocol: the lenslets' set keeps it, and another
+    front end's (here a wrapper that keeps three views) gives the matching rows of the model."""
+    from napari_ssdpc.physics import transfer
+    from napari_ssdpc.reconstruction.forward import TransferFunctions, ViewModel
+    from napari_ssdpc.settings.optics import Optics
+
+    optics = Optics.paper().replace(condenser_na=0.3)
+    lenslets = [ln for ln in optics.lenslets() if ln.fraction > 0.99][:6]
+    setup = transfer.LensletSetup(optics, lenslets, (32, 32), optics.object_pixel_um)
+    assert isinstance(setup, TransferFunctions)
+
+    class FirstViews:
+        """Another front end's transfer functions: the first three views of the lenslets'."""
+
+        def __init__(self, inner):
+            self.inner, self.i0, self.m_out = inner, inner.i0[:3], inner.m_out
+
+        def band(self, zs):
+            return tuple(h[:, :3] for h in self.inner.band(zs))
+
+        def embed(self, h):
+            return self.inner.embed(h)
+
+    z = [-4.0, 0.0, 4.0]
+    whole = ViewModel(setup, (32, 32), optics.object_pixel_um, z, i0=setup.i0)
+    part = ViewModel(FirstViews(setup), (32, 32), optics.object_pixel_um, z, i0=setup.i0[:3])
+    # the weights are relative to the brightest view of each model
+    scale = (part.w[0] / whole.w[0]).item()
+    np.testing.assert_allclose(part.a, whole.a[:, :3] * scale, rtol=1e-5, atol=1e-7)

@@ -340,3 +340,21 @@ def test_the_objects_of_the_reconstructed_weak_bead(result):
     assert o["dry_mass_pg"] == pytest.approx(o["integrated_dn_um3"] / 0.19)
     assert np.hypot(o["x_um"] - 4.0, o["y_um"] + 3.0) < 0.5 and abs(o["z_um"]) < 3.0  # measured 0.01, -2.1 µm
     assert o["peak_ri"] == pytest.approx(1.518 + float(result.delta_n.max()), abs=1e-6)  # the volume's peak
+
+
+def test_the_methods_read_the_light_field_views_through_measurements(reconstructor):
+    """The light-field front end keeps the Measurements protocol every method reads, and its two
+    models keep the protocols the solvers take (ViewModel's TransferFunctions, NonlinearModel)."""
+    from napari_ssdpc.reconstruction.measurements import Measurements
+    from napari_ssdpc.reconstruction.nonlinear import NonlinearModel
+    from napari_ssdpc.settings.reconstruction import MultisliceSettings
+
+    views = reconstructor.views
+    assert isinstance(views, Measurements)
+    np.testing.assert_array_equal(views.direct_light, views.level[views.lit])
+    model = views.linear_model([-2.0, 0.0, 2.0])
+    assert model.n_views == len(views.lit) and model.pixel_um == views.pixel_um
+    roi = (slice(10, 26), slice(10, 26))
+    ms = views.multislice_model([-2.0, 0.0, 2.0], 2.0, roi, MultisliceSettings(refine=1, source_spacing_na=0.05))
+    assert isinstance(ms, NonlinearModel) and ms.view_shape == (len(views.lit), 16, 16)
+    np.testing.assert_allclose(ms.views(np.zeros(ms.shape, np.float32)), 1.0, atol=1e-4)

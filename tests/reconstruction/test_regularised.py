@@ -23,7 +23,7 @@ def setup():
     mask = np.hypot(yy - 32, xx - 32) < 30
     r_z = 20.0
     zs, planes = padded_planes(z, r_z)
-    tv = TvInversion(ViewModel(optics, lenslets, shape, pixel, zs), planes, r_z, mask=mask)
+    tv = TvInversion(ViewModel.for_lenslets(optics, lenslets, shape, pixel, zs), planes, r_z, mask=mask)
     return tv, mask, z
 
 

@@ -21,7 +21,7 @@ def problem():
     yy, xx = np.mgrid[:64, :64]
     mask = np.hypot(yy - 32, xx - 32) < 30
     zs, planes = padded_planes(z, 20.0)
-    tv = TvInversion(ViewModel(optics, lenslets, (64, 64), 0.8456, zs), planes, 20.0, mask=mask)
+    tv = TvInversion(ViewModel.for_lenslets(optics, lenslets, (64, 64), 0.8456, zs), planes, 20.0, mask=mask)
     rng = np.random.default_rng(0)
     contrast = (0.01 * (np.hypot(yy - 30, xx - 36) < 4) + rng.normal(0, 1e-3, (8, 64, 64))) * mask
     return tv, contrast.astype(np.float32)

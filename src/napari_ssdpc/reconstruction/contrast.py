@@ -18,7 +18,9 @@ from napari_ssdpc.calibration.saturation import warn_saturation
 from napari_ssdpc.calibration.views import extract_views
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics import transfer
+from napari_ssdpc.physics.views_multislice import ViewsMultislice
 from napari_ssdpc.reconstruction import checks, consistency
+from napari_ssdpc.reconstruction.forward import ViewModel
 from napari_ssdpc.settings.lenslets import HALVES
 from napari_ssdpc.settings.optics import Optics
 
@@ -109,6 +111,74 @@ class ViewContrast:
                     f"no lit lenslet in the '{h}' half: the optical axis is not centred among the "
                     "lit lenslets; recalibrate on a white frame or change the condenser NA"
                 )
+
+    @property
+    def direct_light(self) -> np.ndarray:
+        """Each lit view's direct light (the flat's median, or the model's I0_k), (K_lit,)."""
+        return self.level[self.lit]
+
+    def linear_model(self, z_um, *, backend=None, progress=None) -> ViewModel:
+        """The first-order model of the lit views (paper Eqs. 2-4) on the planes ``z_um``.
+
+        Parameters
+        ----------
+        z_um : array_like, (Z,)
+            Planes, µm.
+        backend : {'cpu', 'gpu'} or Backend, optional
+        progress : callable, optional
+            ``progress(done, total, 'operators')``.
+
+        Returns
+        -------
+        ViewModel
+        """
+        return ViewModel.for_lenslets(
+            self.optics,
+            self.lenslets,
+            self.mask.shape,
+            self.pixel_um,
+            z_um,
+            i0=self.direct_light,
+            progress=progress,
+            backend=backend,
+        )
+
+    def multislice_model(self, z_um, dz_um: float, roi, settings, *, backend=None, max_bytes=None) -> ViewsMultislice:
+        """The multislice model of the lit views on the planes ``z_um`` and the region ``roi``.
+
+        Parameters
+        ----------
+        z_um : array_like, (Z,)
+            Planes, µm (evenly spaced).
+        dz_um : float
+            Their spacing, µm.
+        roi : (slice, slice)
+            Rows and columns of the views' grid the model covers (square).
+        settings : MultisliceSettings
+            Its sampling (refine, substeps, source points).
+        backend : {'cpu', 'gpu'} or Backend, optional
+        max_bytes : int, optional
+            Refuse a model that needs more memory.
+
+        Returns
+        -------
+        ViewsMultislice
+        """
+        return ViewsMultislice(
+            self.optics,
+            self.lenslets,
+            self.x_um,
+            self.y_um,
+            z_um,
+            roi=roi,
+            refine=settings.refine,
+            substeps=settings.substeps,
+            source_subsamples=settings.source_subsamples,
+            dz_um=dz_um,
+            source_spacing_na=settings.source_spacing_na,
+            max_bytes=max_bytes,
+            backend=backend,
+        )
 
     def _direct_light(self, flat_views):
         """Each lenslet's direct-light level: measured on the flat, else the model's I0_k."""

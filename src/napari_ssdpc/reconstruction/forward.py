@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import copy
 import math
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import scipy.fft as sfft
@@ -33,17 +34,58 @@ from napari_ssdpc.physics import transfer
 from napari_ssdpc.reconstruction.deconvolution import Band
 from napari_ssdpc.settings.optics import Optics
 
-__all__ = ["ViewModel", "apply", "padded_planes"]
+__all__ = ["TransferFunctions", "ViewModel", "apply", "padded_planes"]
+
+
+@runtime_checkable
+class TransferFunctions(Protocol):
+    """What a :class:`ViewModel` is built from: the views' weak-object transfer functions.
+
+    The lenslet views of this microscope (:class:`~napari_ssdpc.physics.transfer.LensletSetup`,
+    paper Eqs. 2-4) are one such set; a fitted pupil or another microscope's images (an LED
+    array's half-disk patterns) are others: anything that gives each view's phase transfer
+    function at any depth on the band of frequencies its intensity can hold.
+
+    Attributes
+    ----------
+    i0 : ndarray, float, (K,)
+        Each view's direct-light background in the model (what its contrast is normalised by).
+    m_out : (int, int)
+        The band grid (my, mx) the transfer functions are given on, unshifted FFT order.
+    """
+
+    i0: np.ndarray
+    m_out: tuple[int, ...]
+
+    def band(self, zs) -> tuple[np.ndarray, np.ndarray]:
+        """(H_abs, H_phase), each (Z, K, my, mx), on the band grid.
+
+        Parameters
+        ----------
+        zs : ndarray, (Z,)
+            Depths, µm.
+        """
+        ...
+
+    def embed(self, h) -> np.ndarray:
+        """Transfer functions on the band grid placed on the whole image grid.
+
+        Parameters
+        ----------
+        h : ndarray, (..., my, mx)
+        """
+        ...
 
 
 class ViewModel:
     """A_p = w_k H_k(u_p; z) / I0_k on the half band, (P, K, Z) complex64.
 
+    Built from any :class:`TransferFunctions`; :meth:`for_lenslets` builds the lenslet views'.
+
     Parameters
     ----------
-    optics : Optics
-    lenslets : list of Lenslet
-        The lit lenslets, in the order of the views.
+    transfer : TransferFunctions
+        The views' transfer functions (their ``i0`` is the model's direct light).
     shape : tuple of int
         (ny, nx) of a view, px.
     pixel_um : float
@@ -74,8 +116,7 @@ class ViewModel:
 
     def __init__(
         self,
-        optics: Optics,
-        lenslets,
+        transfer: TransferFunctions,
         shape,
         pixel_um,
         z_um,
@@ -89,8 +130,7 @@ class ViewModel:
         self.shape = tuple(int(n) for n in shape)
         self.pixel_um = float(pixel_um)
         self.z_um = np.atleast_1d(np.asarray(z_um, float))
-        setup = transfer.LensletSetup(optics, lenslets, self.shape, float(pixel_um))
-        i0_model = setup.i0
+        i0_model = np.asarray(transfer.i0, float)
         if np.any(i0_model <= 0):
             raise SsdpcError(
                 "a lit view gets no direct light at this condenser NA: the calibration's lenslet centres were swapped "
@@ -98,15 +138,15 @@ class ViewModel:
             )
         i0 = np.asarray(i0_model if i0 is None else i0, float)
         self.w = np.sqrt(i0 / i0.max()).astype(np.float32)
-        self.band = Band.box(self.shape, setup.m_out)
+        self.band = Band.box(self.shape, transfer.m_out)
         by, bx = self.band.box_shape
         k, nz = len(i0), len(self.z_um)
         weight = (self.w / i0_model).astype(np.float32)[None, :, None, None]
         a = np.empty((by * bx, k, nz), np.complex64)
         for start in range(0, nz, chunk):
-            _, hp = setup.band(self.z_um[start : start + chunk])  # (z, K, my, mx), unshifted order
+            _, hp = transfer.band(self.z_um[start : start + chunk])  # (z, K, my, mx), unshifted order
             if self.band.is_full:
-                hp = setup.embed(hp)
+                hp = transfer.embed(hp)
             hp = (hp[..., :bx] * weight).astype(np.complex64)  # columns 0..bx−1: the half band
             a[:, :, start : start + len(hp)] = hp.reshape(len(hp), k, by * bx).transpose(2, 1, 0)
             if progress is not None:
@@ -118,6 +158,31 @@ class ViewModel:
         self.a = bk.asarray(a)
         self.multiplicity = bk.asarray(mult.ravel())
         self._w = bk.asarray(self.w)
+
+    @classmethod
+    def for_lenslets(cls, optics: Optics, lenslets, shape, pixel_um, z_um, **kw) -> ViewModel:
+        """The model of the lenslet views (paper Eqs. 2-4: each lenslet's sub-aperture of the pupil).
+
+        Parameters
+        ----------
+        optics : Optics
+        lenslets : list of Lenslet
+            The lit lenslets, in the order of the views.
+        shape : tuple of int
+            (ny, nx) of a view, px.
+        pixel_um : float
+            Object-side pixel of the views, µm.
+        z_um : array_like, shape (Z,)
+            Slab centres, µm.
+        **kw
+            ``i0``, ``progress``, ``chunk``, ``backend`` as for :class:`ViewModel`.
+
+        Returns
+        -------
+        ViewModel
+        """
+        shape = tuple(int(n) for n in shape)
+        return cls(transfer.LensletSetup(optics, lenslets, shape, float(pixel_um)), shape, pixel_um, z_um, **kw)
 
     @property
     def n_views(self) -> int:

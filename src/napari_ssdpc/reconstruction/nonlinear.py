@@ -52,11 +52,23 @@ class NonlinearModel(Protocol):
     view_shape: tuple[int, ...]
 
     def views(self, dn) -> Any:
-        """The flat-fielded views (K, h, w) of a Δn volume (Z, ny, nx), on the backend."""
+        """The flat-fielded views (K, h, w) of a Δn volume, on the backend.
+
+        Parameters
+        ----------
+        dn : ndarray, (Z, ny, nx)
+        """
         ...
 
     def misfit(self, dn, measured, weight=None) -> tuple[float, Any]:
-        """½ Σ_k ‖W (views − measured)‖² and its gradient with respect to Δn, on the backend."""
+        """½ Σ_k ‖W (views − measured)‖² and its gradient with respect to Δn, on the backend.
+
+        Parameters
+        ----------
+        dn : ndarray, (Z, ny, nx)
+        measured : ndarray, (K, h, w)
+        weight : ndarray, broadcastable to (K, h, w), optional
+        """
         ...
 
 
@@ -109,12 +121,22 @@ class Unknowns:
     xp: Any
 
     def up(self, x):
-        """The model's Δn (Z, k·ny, k·nx) of the unknowns (Z, ny, nx)."""
+        """The model's Δn (Z, k·ny, k·nx) of the unknowns.
+
+        Parameters
+        ----------
+        x : ndarray, (Z, ny, nx)
+        """
         k = self.refine
         return x if k == 1 else self.xp.repeat(self.xp.repeat(x, k, axis=1), k, axis=2)
 
     def down(self, g):
-        """The adjoint of :meth:`up`: sums of the model's k x k samples, (Z, ny, nx)."""
+        """The adjoint of :meth:`up`: sums of the model's k x k samples, (Z, ny, nx).
+
+        Parameters
+        ----------
+        g : ndarray, (Z, k·ny, k·nx)
+        """
         k = self.refine
         if k == 1:
             return g
@@ -160,11 +182,21 @@ class Fit:
         return self.model.bk.xp
 
     def project(self, x):
-        """x on C: clipped to [lo, hi], 0 outside the field stop."""
+        """x on C: clipped to [lo, hi], 0 outside the field stop.
+
+        Parameters
+        ----------
+        x : ndarray, (Z, ny, nx) on the unknowns' grid
+        """
         return self.xp.clip(x, self.lo, self.hi) * self.inside
 
     def residual(self, x):
-        """W (I(x) / I0 − m), (K, h, w), on the backend."""
+        """W (I(x) / I0 − m), (K, h, w), on the backend.
+
+        Parameters
+        ----------
+        x : ndarray, (Z, ny, nx) on the unknowns' grid
+        """
         return (self.model.views(self.unknowns.up(x)) - self.measured) * self.xp.sqrt(self.weight)
 
     def objective(self, x, with_grad: bool = True):

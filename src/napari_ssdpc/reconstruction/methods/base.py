@@ -10,7 +10,7 @@ import numpy as np
 
 from napari_ssdpc.backend import Backend
 from napari_ssdpc.errors import Cancelled
-from napari_ssdpc.reconstruction.contrast import ViewContrast
+from napari_ssdpc.reconstruction.measurements import Measurements
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.settings.reconstruction import ReconstructionSettings
 
@@ -26,8 +26,9 @@ class Setup:
     optics : Optics
     settings : ReconstructionSettings
         The method reads its own section (``settings.tv``, ``settings.wotf``, ...).
-    views : ViewContrast
-        The lit lenslets, their direct light, the field stop and the view grid.
+    views : Measurements
+        The front end's views: their grid, masks and direct light, and their models (the light-field
+        views of a calibration, :class:`~napari_ssdpc.reconstruction.contrast.ViewContrast`).
     z_um : ndarray, (Z,)
         The output planes, µm.
     backend : Backend
@@ -36,7 +37,7 @@ class Setup:
 
     optics: Optics
     settings: ReconstructionSettings
-    views: ViewContrast
+    views: Measurements
     z_um: np.ndarray
     backend: Backend
 

@@ -256,21 +256,14 @@ class MultisliceMethod(PhaseMethod):
 
     def _model(self, planes: slice, rows: slice, cols: slice) -> ViewsMultislice:
         """The multislice model of the views on ``planes`` of the output grid and the region (rows, cols)."""
-        s, v, ms = self.setup, self.setup.views, self.setup.settings.multislice
-        return ViewsMultislice(
-            s.optics,
-            v.lenslets,
-            v.x_um,
-            v.y_um,
+        s = self.setup
+        return s.views.multislice_model(
             s.z_um[planes],
-            roi=(rows, cols),
-            refine=ms.refine,
-            substeps=ms.substeps,
-            source_subsamples=ms.source_subsamples,
-            dz_um=s.dz_um,
-            source_spacing_na=ms.source_spacing_na,
-            max_bytes=available_memory(),
+            s.dz_um,
+            (rows, cols),
+            s.settings.multislice,
             backend=s.backend,
+            max_bytes=available_memory(),
         )
 
     def settings(self) -> dict:

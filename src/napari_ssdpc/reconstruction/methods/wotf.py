@@ -25,17 +25,7 @@ def view_model(setup: Setup, z_um, progress=None) -> ViewModel:
     -------
     ViewModel
     """
-    v = setup.views
-    return ViewModel(
-        setup.optics,
-        v.lenslets,
-        v.mask.shape,
-        v.pixel_um,
-        z_um,
-        i0=v.level[v.lit],
-        progress=progress,
-        backend=setup.backend,
-    )
+    return setup.views.linear_model(z_um, backend=setup.backend, progress=progress)
 
 
 def contrast_of(views, view_mask) -> np.ndarray:
