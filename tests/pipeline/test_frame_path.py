@@ -1,5 +1,7 @@
 """The path of one frame through `ssdpc reconstruct`: each input is checked and cut into views once."""
 
+import json
+
 import numpy as np
 import tifffile
 
@@ -25,3 +27,14 @@ def test_ssdpc_reconstruct_cuts_the_flat_and_the_frame_into_views_once(synthetic
     assert main([*args, "-o", str(tmp_path / "out.ome.tif")]) == 0
     # the view grid (an empty frame), the flat, the frame: nothing is cut twice
     assert len(cut) == 3 and cut[0] == 0.0 and all(c > 0 for c in cut[1:])
+    # what the CLI wrote beside the volume is the job's one metadata (napari's stores use the same builder)
+    from napari_ssdpc._version import SOFTWARE
+    from napari_ssdpc.io.frames import tiff_info
+    from napari_ssdpc.pipeline.job import Job
+    from napari_ssdpc.settings.config import RunConfig
+
+    desc = json.loads(tiff_info(tmp_path / "out.ome.tif").ome["Description"])
+    meta = Job(RunConfig.of(optics), cal).metadata("frame.tif")
+    assert meta["software"] == SOFTWARE and "lenslets" not in meta["calibration"]
+    for key in ("software", "source", "optics", "medium_index", "calibration"):
+        assert desc[key] == meta[key], key

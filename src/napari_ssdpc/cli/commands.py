@@ -15,7 +15,6 @@ from pathlib import Path
 
 import numpy as np
 
-from napari_ssdpc._version import SOFTWARE
 from napari_ssdpc.cli.options import run_config
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.paths import check_outputs, is_ours, writable_folder
@@ -288,16 +287,13 @@ def cmd_reconstruct(args):
         # a series streams, frame by frame
         source = StoredFrames(args.raw if is_zarr else read_frame(args.raw), label=Path(args.raw).name)
     flat = read_frame(args.flat, allow_series=False, name="flat frame") if args.flat else None
-    meta = {
-        "software": SOFTWARE,
-        "optics": cfg.optics.to_dict(),
-        "calibration": {k: v for k, v in cal.to_dict().items() if k != "lenslets"},
-    }
+    job = Job(cfg, cal, flat)
+    meta = job.metadata(Path(args.raw).name)
     sink = ZarrSink(out, cfg.outputs.save, meta) if is_zarr else OmeTiffSink(paths, meta)
     if not is_zarr and len(source) > 1:
         raise SsdpcError(f"{args.raw} holds {len(source)} frames; write a time series to OME-Zarr (-o OUT.zarr)")
     with tqdm_callback("building operators", unit="plane", disable=distributed) as cb:
-        pipeline = Pipeline(Job(cfg, cal, flat), progress=cb, workers=args.workers, scheduler=args.scheduler)
+        pipeline = Pipeline(job, progress=cb, workers=args.workers, scheduler=args.scheduler)
     if follow:
         follow_recording(pipeline, source, sink, out, cfg.outputs.save)
         return

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from napari_ssdpc._version import SOFTWARE
 from napari_ssdpc.calibration.result import Calibration
 from napari_ssdpc.settings.config import RunConfig
 
@@ -55,6 +56,29 @@ class Job:
         return Reconstructor(
             self.config, self.calibration, flat=self.flat, dark=self.dark, stacks=self.stacks, progress=progress
         )
+
+    def metadata(self, source: str | None = None) -> dict:
+        """What every store and file of this job records beside its data (one shape for every face).
+
+        Parameters
+        ----------
+        source : str, optional
+            What the frames came from (a file's or a layer's name).
+
+        Returns
+        -------
+        dict
+            ``software``, ``source`` (when given), ``optics``, ``medium_index`` and ``calibration``
+            (without the per-lenslet table); the sinks add each result's settings.
+        """
+        optics = self.config.optics
+        meta = {
+            "software": SOFTWARE,
+            "optics": optics.to_dict(),
+            "medium_index": optics.medium_index,
+            "calibration": {k: v for k, v in self.calibration.to_dict().items() if k != "lenslets"},
+        }
+        return meta if source is None else {"source": str(source), **meta}
 
     @functools.cached_property
     def key(self) -> str:

@@ -97,9 +97,7 @@ class LiveFollow:
         try:
             job = rc.session.job(save=[q for q in wanted if q != "ri"])
             rc.session.remember()
-            optics = job.config.optics
-            meta = {"source": Path(path).name, "optics": optics.to_dict(), "medium_index": optics.medium_index}
-            sink = ZarrSink(Path(store), job.config.outputs.save, meta)
+            sink = ZarrSink(Path(store), job.config.outputs.save, job.metadata(Path(path).name))
         except SsdpcError as e:
             notify.error(e)
             return None

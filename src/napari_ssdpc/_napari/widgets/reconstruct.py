@@ -248,10 +248,8 @@ class ReconstructWidget(StepWidget):
         """Every frame of a series into the OME-Zarr ``store``, shown from disk as frames finish."""
         path = layer.metadata.get("ssdpc", {}).get("path")
         frames = path if path and Path(path).is_file() else layer.data  # a file streams from disk
-        optics = job.config.optics
-        meta = {"source": layer.name, "optics": optics.to_dict(), "medium_index": optics.medium_index}
         try:
-            sink = ZarrSink(store, job.config.outputs.save, meta)
+            sink = ZarrSink(store, job.config.outputs.save, job.metadata(layer.name))
         except SsdpcError as e:
             notify.error(e)
             return None

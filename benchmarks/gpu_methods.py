@@ -1,0 +1,81 @@
+"""The phase methods on the CPU and on a GPU, in one process on the same frames (docs/performance.md).
+
+Paper optics at condenser NA 0.25 (16 lit views), the simulated 13 µm PMMA bead of ``ssdpc bench``:
+'wotf' and 'tv' over z −60..60 µm every 1 µm (121 planes), 'multislice' over z −30..30 µm in its
+region of interest; then the 8-frame moving sample streamed from a TIFF into OME-Zarr with 'wotf'
+and with 'tv' warm-started. Per method and device: the build time, the first frame (FFT plans,
+CUDA kernels) and the next one, frames/s of the series, and how far the GPU's Δn lies from the
+CPU's (max |Δn_gpu − Δn_cpu| / max |Δn_cpu|).
+
+    python benchmarks/gpu_methods.py --cache DIR [--json OUT.json] [--devices cpu gpu]
+
+The frames come from ``ssdpc bench``'s cache (simulated there when missing).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from napari_ssdpc.backend import get_backend
+from napari_ssdpc.calibration import calibrate
+from napari_ssdpc.validation.bench import MULTISLICE_CASE, TV_CASE, TV_NA, TV_SERIES_FRAMES, machine, simulated_case
+from napari_ssdpc.validation.bench_stages import fast_path, series_stage
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cache", type=Path, required=True, help="folder of the simulated frames (ssdpc bench's cache)")
+    ap.add_argument("--json", type=Path, default=None, help="write the report here")
+    ap.add_argument("--devices", nargs="+", default=["cpu", "gpu"], choices=["cpu", "gpu"])
+    ap.add_argument("--no-series", action="store_true", help="skip the 8-frame series")
+    args = ap.parse_args(argv)
+
+    report: dict = {"machine": machine(), "devices": {d: get_backend(d).name for d in args.devices}, "rows": {}}
+    case = simulated_case("bench-pmma-bead", TV_NA, args.cache)
+    cal = calibrate(case.white, case.optics)
+    dn: dict = {}
+    for device in args.devices:
+        for name, cfg, repeats in (
+            ("wotf", {**TV_CASE, "method": "wotf"}, 3),
+            ("tv", TV_CASE, 2),
+            ("multislice", MULTISLICE_CASE, 1),
+        ):
+            t0 = time.perf_counter()
+            _, res, info = fast_path(case, cal, cfg, device, stacks=False, repeats=repeats)
+            keep = ("build_s", "first_frame_s", "frame_s", "planes", "lit_lenslets")
+            row = {k: info[k] for k in keep}
+            row["stage_s"] = time.perf_counter() - t0
+            for k in ("tv_iterations_run", "multislice_iterations_run", "multislice_seconds", "multislice_device"):
+                if k in res.settings:
+                    row[k] = res.settings[k]
+            dn[(name, device)] = np.asarray(res.delta_n, np.float64)
+            report["rows"][f"{name}_{device}"] = row
+            print(f"{name:10s} {device}: build {row['build_s']:.2f} s, frame {row['frame_s']:.3f} s", flush=True)
+    if "cpu" in args.devices and "gpu" in args.devices:
+        for name in ("wotf", "tv", "multislice"):
+            a, b = dn[(name, "cpu")], dn[(name, "gpu")]
+            report["rows"][f"{name}_gpu"]["max_rel_diff_vs_cpu"] = float(np.abs(a - b).max() / np.abs(a).max())
+            report["rows"][f"{name}_gpu"]["speedup_vs_cpu"] = (
+                report["rows"][f"{name}_cpu"]["frame_s"] / report["rows"][f"{name}_gpu"]["frame_s"]
+            )
+    if not args.no_series:
+        mcase = simulated_case(f"bench-moving{TV_SERIES_FRAMES}", TV_NA, args.cache, frames=TV_SERIES_FRAMES)
+        mcal = calibrate(mcase.white, mcase.optics)
+        for device in args.devices:
+            for key, method, warm in (("series_wotf", "wotf", False), ("series_tv_warm", "tv", True)):
+                cfg = {**TV_CASE, "method": method}
+                row = series_stage(mcase, mcal, cfg, device, TV_SERIES_FRAMES, stacks=False, warm_start=warm)
+                report["rows"][f"{key}_{device}"] = row
+                print(f"{key} {device}: {row['steady_frames_per_s']:.2f} frames/s in steady state", flush=True)
+    if args.json:
+        args.json.write_text(json.dumps(report, indent=1, default=str))
+    return report
+
+
+if __name__ == "__main__":
+    main()
