@@ -259,3 +259,32 @@ def test_fourier_transforms_go_through_the_backend(path):
     assert not direct, (
         f"{path.relative_to(PKG)} calls {sorted(set(direct))} directly; use a Backend (bk.fft2, cpu().rfft2)"
     )
+
+
+def _module_name(path: Path) -> str:
+    rel = path.relative_to(PKG.parent).with_suffix("")
+    return ".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
+
+
+def test_no_two_modules_import_each_other():
+    """No import circle between our modules, counting the imports inside functions too: a circle
+    means two modules share a concern that belongs in a third."""
+    names = {_module_name(p): p for p in MODULES}
+    graph = {}
+    for name, path in names.items():
+        if path.name == "__init__.py":
+            continue
+        graph[name] = {m for m in _imports(path) if m in names and not names[m].name == "__init__.py" and m != name}
+    # Tarjan-free: a circle exists where a module reaches itself
+    circles = set()
+    for start in graph:
+        seen, stack = set(), [(start, (start,))]
+        while stack:
+            node, trail = stack.pop()
+            for nxt in graph.get(node, ()):
+                if nxt == start:
+                    circles.add(tuple(sorted(trail)))
+                elif nxt not in seen:
+                    seen.add(nxt)
+                    stack.append((nxt, (*trail, nxt)))
+    assert not circles, f"import circles: {sorted(circles)}"

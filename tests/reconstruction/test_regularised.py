@@ -181,13 +181,13 @@ def test_the_temporal_prior_does_not_hold_a_moving_object_back(setup):
 def test_the_temporal_weight_is_a_runtime_setting_with_a_flag():
     import argparse
 
-    from napari_ssdpc.cli.options import add_reconstruction_options, run_config
+    from napari_ssdpc.cli.options import add_reconstruction_options, config_from_args
     from napari_ssdpc.errors import SsdpcError
     from napari_ssdpc.settings import ReconstructionSettings
 
     parser = argparse.ArgumentParser()
     add_reconstruction_options(parser)
-    rec = run_config(parser.parse_args(["--temporal-weight", "1.5"]), None).reconstruction
+    rec = config_from_args(parser.parse_args(["--temporal-weight", "1.5"]), None).reconstruction
     assert rec.tv.temporal_weight == 1.5 and ReconstructionSettings().tv.temporal_weight == 0.0  # off by default
     assert rec.operator_key() == ReconstructionSettings().operator_key()  # the operators are kept
     with pytest.raises(SsdpcError, match="temporal_weight"):

@@ -34,6 +34,7 @@ from scipy import ndimage
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.settings.reconstruction import ReconstructionSettings
+from napari_ssdpc.statistics import robust_sigma
 
 __all__ = [
     "DEFAULT_RULE",
@@ -139,7 +140,7 @@ def noise_sigma(delta_n) -> float:
     d = d[np.isfinite(d)]
     if d.size == 0:
         raise SsdpcError("the Δn volume holds no finite value; was the frame reconstructed?")
-    return float(1.4826 * np.median(np.abs(d - np.median(d))))
+    return robust_sigma(d)
 
 
 def _voxel(z_um, y_um, x_um) -> tuple[float, float, float]:

@@ -27,6 +27,7 @@ from scipy import ndimage, optimize, signal
 from scipy.special import erfc
 
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.statistics import robust_sigma
 
 #: the 20 % quantile of |N(0, 1)|: turns the 20th percentile of |differences| into σ
 _Q20 = 0.2533
@@ -229,7 +230,7 @@ def rim_circle(img: np.ndarray, c0, radius: float, reach: float = 0.25, neighbou
     p = np.array([c0[0], c0[1], float(np.median(rim_r[ok]))])
     p = optimize.least_squares(resid, p, args=(ok,), loss="cauchy", f_scale=scale).x
     res = np.abs(np.hypot(px - p[0], py - p[1]) - p[2])
-    sig = max(1.4826 * float(np.median(res[ok])), 0.25 * scale)
+    sig = max(robust_sigma(res[ok], about=0.0), 0.25 * scale)
     inl = ok & (res < 3 * sig)
     if inl.sum() < max(8, 0.3 * usable):
         return None
@@ -340,7 +341,7 @@ def fit_rim(img, circle: Circle, neighbours, delta: float, dark: float) -> RimFi
             return None
         p = r.x
         res = _edge_residual(p, x, y, z, c0, r0, scale)
-        mad = 1.4826 * np.median(np.abs(res[use])) + 1e-12
+        mad = robust_sigma(res[use], about=0.0) + 1e-12
         use = np.abs(res) < 5 * mad
     cx, cy, R, w, a0 = p[:5]
     moved = math.hypot(cx - c0[0], cy - c0[1])

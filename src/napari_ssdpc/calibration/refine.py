@@ -15,6 +15,7 @@ import numpy as np
 from napari_ssdpc.calibration.axis import all_cells, ei_brightness
 from napari_ssdpc.calibration.disks import fit_rim, rim_circle
 from napari_ssdpc.calibration.lattice_fit import MIN_AFFINE, MIN_EIS, AffineLattice, fit_affine
+from napari_ssdpc.statistics import robust_sigma
 
 __all__ = ["OUTLIER", "SMALL_EI_PX", "all_rims", "fit_lattice", "outshone", "refine_centres"]
 
@@ -208,7 +209,7 @@ def fit_lattice(xy, n, sig, pitch, flip, usable, cell, whole_array=False):
     lat, res = fit(trusted)
     for _ in range(3):
         rr = np.hypot(res[:, 0], res[:, 1])
-        new = trusted & (rr < max(OUTLIER * pitch, 5 * 1.4826 * float(np.median(rr[trusted]))))
+        new = trusted & (rr < max(OUTLIER * pitch, 5 * robust_sigma(rr[trusted], about=0.0)))
         if new.sum() < MIN_EIS or np.array_equal(new, trusted):
             break
         trusted = new

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from napari_ssdpc.cli.options import run_config
+from napari_ssdpc.cli.follow import follow_recording, followed, report_series
+from napari_ssdpc.cli.options import config_from_args
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.paths import check_outputs, is_ours, writable_folder
 from napari_ssdpc.settings.outputs import QUANTITIES
@@ -31,7 +32,6 @@ __all__ = [
     "cmd_simulate",
     "make_phantom",
     "output_paths",
-    "report_series",
 ]
 
 PHANTOMS = ("bead", "two-beads", "cell", "bars", "moving")
@@ -241,7 +241,6 @@ def cmd_reconstruct(args):
         The parsed options of `ssdpc reconstruct` (see ``ssdpc reconstruct --help``).
     """
     from napari_ssdpc.calibration.result import Calibration
-    from napari_ssdpc.cli.follow import follow_recording, followed
     from napari_ssdpc.io.frame_source import StoredFrames
     from napari_ssdpc.io.frames import read_frame
     from napari_ssdpc.pipeline.job import Job
@@ -280,7 +279,7 @@ def cmd_reconstruct(args):
     if follow and not (math.isfinite(args.idle) and args.idle > 0):
         raise SsdpcError(f"--idle must be a positive number of seconds, got {args.idle}")
     cal = Calibration.from_json(args.calibration)
-    cfg = run_config(args, None if args.optics is None else _optics(args.optics), fallback=cal.optics)
+    cfg = config_from_args(args, None if args.optics is None else _optics(args.optics), fallback=cal.optics)
     if follow:
         source = followed(args.raw, args.idle)
     else:
@@ -308,27 +307,6 @@ def cmd_reconstruct(args):
     print(
         f"volume {dn.shape} (z, y, x), voxel {voxel[0]:g} x {voxel[1]:.4f} x {voxel[2]:.4f} µm; "
         f"delta n from {dn.min():+.4f} to {dn.max():+.4f}"
-    )
-
-
-def report_series(report, out, save):
-    """Print what a series run wrote (or that every frame was there already).
-
-    Parameters
-    ----------
-    report : RunReport
-    out : Path
-        The store.
-    save : list of str
-        Quantities beside RI.
-    """
-    names = ", ".join(["ri", *save])
-    if report.written == 0:
-        print(f"{out}: all {report.frames} frames were already written ({names})")
-        return
-    print(
-        f"wrote {out} ({report.written} of {report.frames} frames, {report.skipped} done before: {names}; "
-        f"{report.frames_per_second:.2f} frames/s)"
     )
 
 

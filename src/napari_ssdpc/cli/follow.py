@@ -6,9 +6,7 @@ import sys
 
 import numpy as np
 
-from napari_ssdpc.cli.commands import report_series
-
-__all__ = ["follow_recording", "followed"]
+__all__ = ["follow_recording", "followed", "report_series"]
 
 
 def followed(path, idle_s):
@@ -62,3 +60,24 @@ def follow_recording(pipeline, source, sink, out, save):
             )
     print(f"no new frame for {source.idle_s:g} s: stopped", file=sys.stderr)
     report_series(report, out, save)
+
+
+def report_series(report, out, save):
+    """Print what a series run wrote (or that every frame was there already).
+
+    Parameters
+    ----------
+    report : RunReport
+    out : Path
+        The store.
+    save : list of str
+        Quantities beside RI.
+    """
+    names = ", ".join(["ri", *save])
+    if report.written == 0:
+        print(f"{out}: all {report.frames} frames were already written ({names})")
+        return
+    print(
+        f"wrote {out} ({report.written} of {report.frames} frames, {report.skipped} done before: {names}; "
+        f"{report.frames_per_second:.2f} frames/s)"
+    )

@@ -19,7 +19,7 @@ from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.settings.outputs import SAVE_CHOICES, OutputSettings
 from napari_ssdpc.settings.reconstruction import DEFAULT_Z_UM, ReconstructionSettings, alpha_section
 
-__all__ = ["FLAGS", "add_reconstruction_options", "run_config"]
+__all__ = ["FLAGS", "add_reconstruction_options", "config_from_args"]
 
 #: CLI flag -> settings key; "section.key" for a method's section (``--z`` sets the pair
 #: z_min_um, z_max_um; ``--alpha`` the chosen method's alpha; ``--save`` the outputs).
@@ -113,7 +113,7 @@ def add_reconstruction_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def run_config(args: argparse.Namespace, optics: Optics | None, fallback: Optics | None = None) -> RunConfig:
+def config_from_args(args: argparse.Namespace, optics: Optics | None, fallback: Optics | None = None) -> RunConfig:
     """The run configuration: the --config file (or defaults), then the flags given on top.
 
     Parameters

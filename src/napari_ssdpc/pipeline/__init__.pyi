@@ -1,5 +1,6 @@
+from .frame import RunReport, process_frame
 from .job import Job
-from .run import Pipeline, RunReport, process_frame
+from .run import Pipeline
 from .sinks import MemorySink, OmeTiffSink, OutputGrid, Sink, ZarrSink
 from .sources import FrameSource, LiveFrames, as_source
 

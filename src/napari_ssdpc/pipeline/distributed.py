@@ -1,13 +1,13 @@
 """The frame loop on a Dask cluster: workers build the job's Reconstructor once and process
-frames of a file into a shared OME-Zarr store (the same :func:`~.run.process_frame`)."""
+frames of a file into a shared OME-Zarr store (the same :func:`~.frame.process_frame`)."""
 
 from __future__ import annotations
 
 import time
 
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.pipeline.frame import RunReport, frame_bar, process_frame
 from napari_ssdpc.pipeline.job import Job
-from napari_ssdpc.pipeline.run import RunReport, frame_bar, process_frame
 from napari_ssdpc.pipeline.sinks import OutputGrid, ZarrSink
 
 __all__ = ["run_on_dask"]

@@ -23,13 +23,14 @@ from napari_ssdpc.reconstruction import checks, consistency
 from napari_ssdpc.reconstruction.forward import ViewModel
 from napari_ssdpc.settings.lenslets import HALVES
 from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.statistics import robust_sigma
 
 __all__ = ["ViewContrast"]
 
 
 def _noise(dark) -> float:
     """Robust standard deviation of the dark pixels (MAD x 1.4826), camera units."""
-    return max(1.4826 * float(np.median(np.abs(dark - np.median(dark)))), 1e-6) if dark.size else 1e-6
+    return max(robust_sigma(dark), 1e-6) if dark.size else 1e-6
 
 
 class ViewContrast:

@@ -123,7 +123,7 @@ class SsdpcDock(QWidget):
             (the message is shown).
         """
         try:
-            return self.session.run_config().to_yaml(path)
+            return self.session.config().to_yaml(path)
         except SsdpcError as e:
             notify.error(e)
         except OSError as e:

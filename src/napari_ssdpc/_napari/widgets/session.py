@@ -108,7 +108,7 @@ class Session:
             data[section] = {**data[section], **star}
         return ReconstructionSettings.from_dict(data, source="the dock's settings")
 
-    def run_config(self, save=()) -> RunConfig:
+    def config(self, save=()) -> RunConfig:
         """The optics, the reconstruction settings and the outputs: what ``ssdpc reconstruct --config`` reads.
 
         Parameters
@@ -142,7 +142,7 @@ class Session:
         if inputs["calibration"] is None:
             raise SsdpcError("no calibration: run Calibrate on a white frame, or open a calibration JSON")
         flat = None if inputs["flat"] is None else np.asarray(inputs["flat"])
-        return Job(self.run_config(save), inputs["calibration"], flat, stacks=bool(inputs["stacks"]))
+        return Job(self.config(save), inputs["calibration"], flat, stacks=bool(inputs["stacks"]))
 
     def load_config(self, config: RunConfig) -> None:
         """Show a run configuration in every widget (optics first, then the settings).
@@ -161,7 +161,7 @@ class Session:
         path = remembered_settings_path()
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            self.run_config().to_yaml(path)
+            self.config().to_yaml(path)
         except (SsdpcError, OSError):
             pass
 

@@ -1,0 +1,109 @@
+"""One frame through the loop (read, reconstruct, write) and what a run did: shared by the serial
+loop (:mod:`.run`) and the Dask runner (:mod:`.distributed`)."""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass, field
+
+from napari_ssdpc.pipeline.sinks import Sink
+from napari_ssdpc.pipeline.sources import FrameSource
+
+__all__ = ["RunReport", "frame_bar", "process_frame"]
+
+
+@dataclass
+class RunReport:
+    """What a run did.
+
+    Attributes
+    ----------
+    frames : int
+        Frames in the source at the end.
+    written : int
+        Frames reconstructed and written by this run.
+    skipped : int
+        Frames already done by an earlier run (resumed).
+    seconds : float
+        Wall time of this run's frames, s.
+    build_seconds : float
+        Time to build the operators, s.
+    timings : list of dict
+        Per frame, as :func:`process_frame` returns them.
+    """
+
+    frames: int
+    written: int
+    skipped: int
+    seconds: float
+    build_seconds: float
+    timings: list = field(default_factory=list)
+
+    @property
+    def frames_per_second(self) -> float:
+        """Frames written per second of this run (NaN when none took time)."""
+        return self.written / self.seconds if self.seconds > 0 else float("nan")
+
+
+def process_frame(rec, source: FrameSource, t: int, sink: Sink, *, warm=None, progress=None, should_stop=None):
+    """Read frame t, reconstruct it and write it (serially and on Dask workers).
+
+    Parameters
+    ----------
+    rec : Reconstructor
+    source : FrameSource
+    t : int
+        Frame index.
+    sink : Sink
+        Opened.
+    warm : Solution, optional
+        Start of an iterative method (the previous frame's solution).
+    progress, should_stop : callable, optional
+        Per iteration (see :meth:`Reconstructor.reconstruct`).
+
+    Returns
+    -------
+    timing : dict
+        ``t`` and the seconds spent reading, reconstructing and writing (plus the solver's).
+    result : Result
+    """
+    t0 = time.perf_counter()
+    frame = source[t]
+    t1 = time.perf_counter()
+    result = rec.reconstruct(
+        frame, warm=warm, progress=progress, should_stop=should_stop, name=f"{source.name} frame {t}"
+    )
+    t2 = time.perf_counter()
+    write = sink.write(t, result)
+    timing = {"t": int(t), "read_s": t1 - t0, "reconstruct_s": t2 - t1, "write_s": write, **result.timings}
+    return timing, result
+
+
+def frame_bar(total, initial, show):
+    """A tqdm bar of frames on stderr.
+
+    Parameters
+    ----------
+    total : int or None
+        Frames (None: unknown).
+    initial : int
+        Frames already done.
+    show : bool
+
+    Returns
+    -------
+    tqdm.tqdm
+    """
+    from tqdm.auto import tqdm
+
+    return tqdm(
+        total=total,
+        initial=initial,
+        desc="frames",
+        unit="frame",
+        file=sys.stderr,
+        dynamic_ncols=True,
+        disable=not show,
+        smoothing=0.1,
+    )
