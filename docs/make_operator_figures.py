@@ -16,6 +16,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle
 
 from napari_ssdpc.physics.dpc_transfer import dpc_transfer_functions
+from napari_ssdpc.physics.geometry import nominal_lenslets
 from napari_ssdpc.physics.transfer import lenslet_case
 from napari_ssdpc.settings.optics import Optics
 
@@ -38,7 +39,7 @@ def source_over_lenslets(optics: Optics, condenser_nas=(0.1, 0.25)):
         o = optics.replace(condenser_na=na_c)
         ax.add_patch(Circle((0, 0), o.na, fill=False, lw=2, color="k"))
         ax.add_patch(Circle((0, 0), na_c, color="gold", alpha=0.45, lw=0))
-        for ln in o.lenslets():
+        for ln in nominal_lenslets(o):
             c = COLOURS[lenslet_case(o, ln)]
             x, y = -ln.u[0] * lam, -ln.u[1] * lam
             ax.add_patch(Circle((x, y), o.subaperture_na, fill=False, lw=1.6, color=c))

@@ -10,6 +10,7 @@ import pytest
 from napari_ssdpc import backend
 from napari_ssdpc.backend import get_backend, gpu_available
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.physics.geometry import nominal_lenslets
 from napari_ssdpc.reconstruction.deconvolution import Band, MultiViewRL
 from napari_ssdpc.reconstruction.reconstructor import Reconstructor
 from napari_ssdpc.settings.config import RunConfig
@@ -156,7 +157,7 @@ def _tv_on(device):
     from napari_ssdpc.reconstruction.wotf import WotfInversion
 
     optics = Optics.paper().replace(condenser_na=0.3)
-    lenslets = [ln for ln in optics.lenslets() if lenslet_case(optics, ln) == "straddling"][:8]
+    lenslets = [ln for ln in nominal_lenslets(optics) if lenslet_case(optics, ln) == "straddling"][:8]
     yy, xx = np.mgrid[:64, :64]
     mask = np.hypot(yy - 32, xx - 32) < 30
     zs, planes = padded_planes(np.arange(-10.0, 10.1, 2.0), 20.0)

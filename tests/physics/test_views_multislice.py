@@ -8,6 +8,7 @@ import pytest
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics import transfer
+from napari_ssdpc.physics.geometry import nominal_lenslets
 from napari_ssdpc.physics.views_multislice import ViewsMultislice, square_roi
 from napari_ssdpc.reconstruction.forward import ViewModel
 from napari_ssdpc.settings.lenslets import circle_overlap_fraction
@@ -26,7 +27,7 @@ def _grid(optics, n):
 
 def _lit(optics, n, min_light=0.05):
     """The lenslets with direct light at the optics' condenser NA (as ViewContrast keeps them)."""
-    lenslets = optics.lenslets()
+    lenslets = nominal_lenslets(optics)
     _, _, i0 = transfer.lenslet_transfer_functions(optics, lenslets, (n, n), optics.object_pixel_um)
     return [ln for ln, i in zip(lenslets, i0) if i >= min_light * max(i0)]
 

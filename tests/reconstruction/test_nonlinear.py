@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from napari_ssdpc.backend import Backend, cpu
+from napari_ssdpc.physics.geometry import nominal_lenslets
 from napari_ssdpc.reconstruction.nonlinear import (
     Fit,
     NonlinearModel,
@@ -119,7 +120,7 @@ def test_a_view_model_is_built_from_any_transfer_functions():
     from napari_ssdpc.settings.optics import Optics
 
     optics = Optics.paper().replace(condenser_na=0.3)
-    lenslets = [ln for ln in optics.lenslets() if ln.fraction > 0.99][:6]
+    lenslets = [ln for ln in nominal_lenslets(optics) if ln.fraction > 0.99][:6]
     setup = transfer.LensletSetup(optics, lenslets, (32, 32), optics.object_pixel_um)
     assert isinstance(setup, TransferFunctions)
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import scipy.fft as sfft
 
+from napari_ssdpc.physics.geometry import nominal_lenslets
 from napari_ssdpc.physics.lattice import lenslet_case
 from napari_ssdpc.reconstruction.forward import ViewModel, padded_planes
 from napari_ssdpc.reconstruction.proximal import prox_two_kinks
@@ -16,7 +17,7 @@ from napari_ssdpc.settings.optics import Optics
 @pytest.fixture(scope="module")
 def setup():
     optics = Optics.paper().replace(condenser_na=0.3)
-    lenslets = [ln for ln in optics.lenslets() if lenslet_case(optics, ln) == "straddling"][:8]
+    lenslets = [ln for ln in nominal_lenslets(optics) if lenslet_case(optics, ln) == "straddling"][:8]
     shape, pixel = (64, 64), 0.8456
     z = np.arange(-10.0, 10.1, 2.0)
     yy, xx = np.mgrid[:64, :64]

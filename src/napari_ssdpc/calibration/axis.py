@@ -18,6 +18,7 @@ import numpy as np
 from scipy import ndimage, optimize
 
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.physics.geometry import nominal_lenslets
 from napari_ssdpc.settings.lenslets import circle_overlap_fraction
 
 
@@ -211,7 +212,7 @@ def pupil_lenslets(optics, n_cells: int) -> int:
     -------
     int
     """
-    return max(1, min(sum(1 for ln in optics.lenslets() if ln.fraction >= 0.25), n_cells))
+    return max(1, min(sum(1 for ln in nominal_lenslets(optics) if ln.fraction >= 0.25), n_cells))
 
 
 def decide_kind(img, b, centres, r_ei, optics) -> tuple[str, bool, dict]:

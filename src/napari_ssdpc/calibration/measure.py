@@ -34,6 +34,7 @@ from napari_ssdpc.calibration.refine import OUTLIER, SMALL_EI_PX, all_rims, fit_
 from napari_ssdpc.calibration.result import Calibration, validated
 from napari_ssdpc.calibration.saturation import FULL_SCALE_CODES
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
+from napari_ssdpc.physics.geometry import mla_to_frequency
 from napari_ssdpc.physics.lattice import Grid, xy_pair
 from napari_ssdpc.settings.lenslets import Lenslet, circle_overlap_fraction, lattice_cell
 from napari_ssdpc.settings.optics import Optics
@@ -341,7 +342,7 @@ def _table(grid: Grid, shift, lat: AffineLattice, meas: dict, optics: Optics):
         centres.append(ideal if c is None else c)
         dev.append(np.full(2, np.nan) if c is None else c - ideal)
         a = A_inv @ (centres[-1] - axis) * um_per_px
-        u = optics.mla_to_frequency(a)
+        u = mla_to_frequency(optics, a)
         frac = float(circle_overlap_fraction(math.hypot(*a), optics.lenslet_radius_um, optics.pupil_radius_mla_um))
         lens.append(Lenslet(ln.row, ln.col, (float(a[0]), float(a[1])), (float(u[0]), float(u[1])), frac))
     dev_a = np.array(dev).reshape(-1, 2)

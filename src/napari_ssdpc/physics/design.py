@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 
+from napari_ssdpc.physics.geometry import nominal_lenslets, tan_theta
 from napari_ssdpc.physics.lattice import lenslet_case
 from napari_ssdpc.settings.lenslets import Lenslet
 from napari_ssdpc.settings.optics import Optics
@@ -54,9 +55,9 @@ def design(optics: Optics) -> dict:
     m_t = (2 * f_fl * NA / f_tube) * (f_obj / d)
     dof_fwhm = m_t**2 * lam / NA**2 + optics.pixel_um * m_t**2 / (M * NA)  # Eq. 14
     dof_pitch = d * (f_fl / f_ml) / (d / f_fl) / M**2
-    lens = optics.lenslets()
+    lens = nominal_lenslets(optics)
     usable = [ln for ln in lens if ln.fraction >= 0.5]
-    tan_edge = float(np.max(optics.tan_theta(np.array([ln.u for ln in lens]))))
+    tan_edge = float(np.max(tan_theta(optics, np.array([ln.u for ln in lens]))))
     regimes = [lenslet_case(optics, ln) for ln in lens]
     return {
         "ei_radius_um": optics.ei_radius_um,  # Eq. 8
@@ -93,7 +94,7 @@ def design(optics: Optics) -> dict:
 
 
 def _expected_axial_fwhm(optics: Optics, lens: list[Lenslet], regimes: list[str], rz_um: float) -> float:
-    tan = optics.tan_theta(np.array([ln.u for ln in lens]))
+    tan = tan_theta(optics, np.array([ln.u for ln in lens]))
     straddling = [t for t, r in zip(tan, regimes) if r == "straddling"]
     if not straddling:
         return math.inf

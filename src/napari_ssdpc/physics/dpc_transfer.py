@@ -15,6 +15,7 @@ import numpy as np
 import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
+from napari_ssdpc.physics.geometry import nominal_lenslets
 from napari_ssdpc.physics.lattice import lenslet_case
 from napari_ssdpc.physics.transfer import LensletSetup, paper_transfer_functions
 from napari_ssdpc.settings.lenslets import HALVES, PAIRS
@@ -65,7 +66,7 @@ def dpc_transfer_functions(
         raise SsdpcError("condenser_na is 0: a point source gives no DPC; set the condenser NA in the optics file")
     pixel_um = float(pixel_um or optics.object_pixel_um)
     shape = tuple(int(n) for n in shape)
-    lenslets = list(optics.lenslets() if lenslets is None else lenslets)
+    lenslets = list(nominal_lenslets(optics) if lenslets is None else lenslets)
     zs = np.asarray(z_um, dtype=float)
     out = {
         "model": model,

@@ -18,6 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from napari_ssdpc.physics.geometry import nominal_lenslets
 from napari_ssdpc.settings.lenslets import Lenslet, lattice_cell
 from napari_ssdpc.settings.optics import Optics
 
@@ -128,7 +129,7 @@ class Grid:
         -------
         list of Lenslet
         """
-        return optics.lenslets(self.axis_offset_um(optics), min_fraction=min_fraction)
+        return nominal_lenslets(optics, self.axis_offset_um(optics), min_fraction=min_fraction)
 
     def object_to_sensor(self, lenslet: Lenslet, xy_um, optics: Optics) -> np.ndarray:
         """Sensor position of an in-focus object point (x, y) µm in the EI of ``lenslet``.

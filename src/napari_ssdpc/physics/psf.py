@@ -38,6 +38,7 @@ import scipy.fft as sfft
 
 from napari_ssdpc.backend import cpu
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.physics.geometry import nominal_lenslets
 from napari_ssdpc.physics.pupil import axial_frequency, mean_tilt, subaperture_pupil
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.settings.reconstruction import DEFAULT_Z_UM
@@ -91,9 +92,9 @@ class LensletPSF:
         pixel_integration=True,
     ):
         self.optics = optics
-        self.lenslets = list(optics.lenslets() if lenslets is None else lenslets)
+        self.lenslets = list(nominal_lenslets(optics) if lenslets is None else lenslets)
         if not self.lenslets:
-            raise SsdpcError("no lenslets given; calibrate the lattice or use optics.lenslets()")
+            raise SsdpcError("no lenslets given; calibrate the lattice or use nominal_lenslets(optics)")
         self.pixel_um = float(pixel_um or optics.object_pixel_um)
         if not self.pixel_um > 0:
             raise SsdpcError(f"pixel_um must be > 0, got {pixel_um}")

@@ -21,6 +21,7 @@ import scipy.fft as sfft
 
 from napari_ssdpc.backend import cpu
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.physics.geometry import nominal_lenslets
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.physics.pupil import axial_frequency, soft_disk
 from napari_ssdpc.physics.waves import transfer_function
@@ -127,11 +128,11 @@ def reference_psf(
             raise SsdpcError("reference_psf needs an unrotated, unmirrored grid; use Grid.nominal(optics)")
         axis = np.asarray(grid.axis_px, dtype=float)
         offset = grid.axis_offset_um(optics)
-        apertures = optics.lenslets(offset, min_fraction=1e-9)
+        apertures = nominal_lenslets(optics, offset, min_fraction=1e-9)
         lenslets = grid.lenslets(optics)
         origin = np.rint(axis) - half_px
     else:
-        lenslets = optics.lenslets() if grid_or_lenslets is None else list(grid_or_lenslets)
+        lenslets = nominal_lenslets(optics) if grid_or_lenslets is None else list(grid_or_lenslets)
         apertures = lenslets
         origin = np.array([0.0, 0.0])
         axis = origin + half_px

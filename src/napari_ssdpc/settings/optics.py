@@ -13,19 +13,16 @@ Fourier-lens relay inverts the back focal plane onto the MLA.
 
 from __future__ import annotations
 
-import math
 import warnings
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import yaml
 from pydantic import Field, model_validator
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.settings.base import SettingsModel, bounded
 from napari_ssdpc.settings.files import read_mapping
-from napari_ssdpc.settings.lenslets import Lenslet, circle_overlap_fraction, lattice_cell
 from napari_ssdpc.settings.parts import MLA, PART_KEYS, Objective, Sensor
 
 __all__ = ["PAPER_OPTICS", "Optics"]
@@ -299,69 +296,6 @@ class Optics(SettingsModel):
     def source_radius(self) -> float:
         """Condenser disk radius in cycles/µm."""
         return self.condenser_na / self.wavelength_um
-
-    def mla_to_frequency(self, a_um):
-        """Sub-aperture centre frequency of a lenslet at MLA position ``a``.
-
-        Parameters
-        ----------
-        a_um : array_like, (..., 2)
-            (x, y) position on the MLA from the optical axis, µm.
-
-        Returns
-        -------
-        ndarray, (..., 2)
-            u_k = -a / (λ f_obj m_r), cycles/µm (docs/conventions.md: the relay inverts the BFP).
-        """
-        return -np.asarray(a_um, dtype=float) / (self.wavelength_um * self.f_obj_um * self.m_r)
-
-    def lenslets(self, axis_offset_um=(0.0, 0.0), min_fraction: float = 1e-3) -> list[Lenslet]:
-        """Lenslets overlapping the objective pupil.
-
-        Parameters
-        ----------
-        axis_offset_um : (float, float)
-            Optical axis position relative to the reference lattice vertex in the MLA plane
-            (x, y), µm: a lenslet centre relative to the axis is its lattice position minus it.
-        min_fraction : float
-            Smallest part of a lenslet inside the pupil that still counts.
-
-        Returns
-        -------
-        list of Lenslet
-        """
-        p = self.pitch_um
-        cell = lattice_cell(self.grid) * p
-        ox, oy = (float(v) for v in axis_offset_um)
-        # every index whose lenslet can reach the pupil (rows of a hex array are skewed: wider column range)
-        reach = (self.pupil_radius_mla_um + self.lenslet_radius_um + math.hypot(ox, oy)) / cell[1, 1]
-        n = int(math.ceil(reach)) + 2
-        out = []
-        for row in np.arange(-n, n):
-            for col in np.arange(-2 * n, 2 * n):
-                ax, ay = (float(v) for v in cell @ (col + 0.5, row + 0.5) - (ox, oy))
-                frac = float(
-                    circle_overlap_fraction(math.hypot(ax, ay), self.lenslet_radius_um, self.pupil_radius_mla_um)
-                )
-                if frac >= min_fraction:
-                    u = self.mla_to_frequency((ax, ay))
-                    out.append(Lenslet(int(row), int(col), (ax, ay), (float(u[0]), float(u[1])), frac))
-        return out
-
-    def tan_theta(self, u) -> np.ndarray:
-        """tanθ of the propagation angle in the medium, sinθ = λ|u|/n.
-
-        Parameters
-        ----------
-        u : array_like, (2,) or (N, 2)
-            Lateral spatial frequency, cycles/µm.
-
-        Returns
-        -------
-        ndarray, (N,)
-        """
-        s = np.clip(self.wavelength_um * np.linalg.norm(np.atleast_2d(u), axis=-1) / self.medium_index, 0, 0.999999)
-        return s / np.sqrt(1 - s * s)
 
 
 PAPER_OPTICS = {

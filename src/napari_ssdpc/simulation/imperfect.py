@@ -18,6 +18,7 @@ import numpy as np
 from scipy import ndimage
 
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.physics.geometry import mla_to_frequency
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.settings.lenslets import Lenslet, circle_overlap_fraction, lattice_cell
 from napari_ssdpc.settings.optics import Optics
@@ -97,7 +98,7 @@ class ArrayErrors:
         for ln in lenslets:
             d = self.offset_px(grid, ln.row, ln.col)
             a = np.asarray(ln.a_um) + np.linalg.solve(grid.matrix, d) * um_per_px
-            u = optics.mla_to_frequency(a)
+            u = mla_to_frequency(optics, a)
             frac = float(circle_overlap_fraction(math.hypot(*a), optics.lenslet_radius_um, optics.pupil_radius_mla_um))
             moved.append(replace(ln, a_um=(float(a[0]), float(a[1])), u=(float(u[0]), float(u[1])), fraction=frac))
             centres.append(grid.lattice_px(ln.row, ln.col) + d)
