@@ -21,9 +21,9 @@ from napari_ssdpc.settings.reconstruction import DEFAULT_Z_UM, ReconstructionSet
 
 __all__ = ["FLAGS", "add_reconstruction_options", "config_from_args"]
 
-#: CLI flag -> settings key; "section.key" for a method's section (``--z`` sets the pair
-#: z_min_um, z_max_um; ``--alpha`` the chosen method's alpha; ``--save`` the outputs).
-FLAGS = {
+#: The short flags: CLI flag -> settings key; "section.key" for a method's section (``--z`` sets the
+#: pair z_min_um, z_max_um; ``--alpha`` the chosen method's alpha; ``--save`` the outputs).
+_NAMED = {
     "dz": "dz_um",
     "method": "method",
     "model": "rl.model",
@@ -39,6 +39,29 @@ FLAGS = {
     "refraction-increment": "refraction_increment_um3_pg",
     "device": "device",
 }
+
+
+#: Keys reached by an option of their own shape (``--roi XMIN XMAX YMIN YMAX``).
+_OWN_OPTION = {"multislice.roi_um"}
+
+
+def _section_flags(named: dict) -> dict:
+    """``--section-key`` for every key of every method's section that no short flag reaches
+    (``--multislice-iterations``, ``--wotf-alpha``, ...): generated from the settings models."""
+    out = {}
+    for section, info in ReconstructionSettings.model_fields.items():
+        model = info.annotation
+        if not (isinstance(model, type) and issubclass(model, BaseModel)):
+            continue
+        for key in model.model_fields:
+            full = f"{section}.{key}"
+            if full not in named.values() and full not in _OWN_OPTION:
+                out[f"{section}-{key.replace('_', '-')}"] = full
+    return out
+
+
+#: CLI flag -> settings key: the short flags, then one per remaining key of every method's section.
+FLAGS = {**_NAMED, **_section_flags(_NAMED)}
 
 
 def _dest(flag: str) -> str:
@@ -96,7 +119,8 @@ def add_reconstruction_options(parser: argparse.ArgumentParser) -> None:
         if ann is bool:  # --flag / --no-flag
             parser.add_argument(f"--{flag}", action=argparse.BooleanOptionalAction, default=None, help=text)
             continue
-        parser.add_argument(f"--{flag}", type=kind, choices=choices, help=text)
+        metavar = None if choices else ("N" if kind is int else "VALUE")
+        parser.add_argument(f"--{flag}", type=kind, choices=choices, metavar=metavar, help=text)
     parser.add_argument(
         "--roi",
         type=float,
