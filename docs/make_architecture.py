@@ -18,14 +18,14 @@ LAYERS = [
     ("settings/", "Optics, ReconstructionSettings (one section per\nmethod), OutputSettings, RunConfig", 0, (0, 3)),
     (
         "physics/",
-        "design, lattice, pupils, waves (propagation, source,\nsub-apertures), PSF (Eq. 6), WOTFs (Eqs. 2-4)",
+        "design, lattice, lenslet geometry, pupils, waves, PSF (Eq. 6),\nWOTFs (Eqs. 2-4), multislice model of the views",
         1,
         (0, 3),
     ),
     ("calibration/", "EI disks, lattice, optical axis,\ncalibrate(), extract_views()", 2, (0, 1.45)),
     (
         "reconstruction/",
-        "Reconstructor: checks, views once, stacks;\nmethods/ registry: tv | wotf | rl",
+        "Reconstructor; Measurements (views once), stacks;\nmethods/ registry: tv | wotf | rl | multislice; nonlinear solver",
         2,
         (1.55, 3),
     ),
@@ -40,8 +40,8 @@ LAYERS = [
 STEPS = [
     ("RunConfig + calibration + flat", "pipeline.job.Job: Reconstructor built once"),
     ("frame source", "pipeline.sources (StoredFrames, LiveFrames)"),
-    ("checked views (K, h, w), once", "reconstruction.contrast.ViewContrast"),
-    ("phase per slab (Z, y, x)", "reconstruction.methods: tv | wotf | rl"),
+    ("checked views (K, h, w), once", "Measurements: contrast.ViewContrast"),
+    ("phase per slab (Z, y, x)", "reconstruction.methods: tv | wotf | rl | multislice"),
     ("Δn, RI volume, checked", "reconstructor.Result, checks.check_result"),
     ("sink", "pipeline.sinks: memory | OME-TIFF | OME-Zarr"),
 ]
@@ -59,7 +59,7 @@ def main() -> None:
         ax.text((x0 + x1) / 2, row + 0.52, name, ha="center", va="center", fontsize=10, weight="bold")
         ax.text((x0 + x1) / 2, row + 0.22, what, ha="center", va="center", fontsize=7.5)
     ax.text(
-        1.5, 4.6, "errors.py · files.py (atomic writes) · progress.py: used by every layer", ha="center", fontsize=8
+        1.5, 4.6, "errors.py · files.py · progress.py · statistics.py · backend.py (NumPy | CuPy, the one FFT entry): used by every layer", ha="center", fontsize=8
     )
     bx.set_xlim(0, 1)
     bx.set_ylim(-0.5, len(STEPS))
