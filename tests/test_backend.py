@@ -186,3 +186,25 @@ def test_gpu_tv_matches_the_cpu():
     assert isinstance(tv_gpu, np.ndarray) and rep.iterations > 0
     assert np.max(np.abs(w_gpu - w_cpu)) <= 1e-4 * np.abs(w_cpu).max()
     assert np.max(np.abs(tv_gpu - tv_cpu)) <= 1e-3 * np.abs(tv_cpu).max()
+
+
+def _multislice_on(device):
+    from napari_ssdpc.physics.views_multislice import ViewsMultislice
+
+    optics = Optics.paper().replace(condenser_na=0.3)
+    lenslets = [ln for ln in nominal_lenslets(optics) if ln.fraction > 0.99][:6]
+    x = (np.arange(24) - 11.5) * optics.object_pixel_um
+    model = ViewsMultislice(optics, lenslets, x, x, [-2.0, 0.0, 2.0], source_spacing_na=0.06, backend=device)
+    rng = np.random.default_rng(7)
+    dn = (0.02 * rng.standard_normal(model.shape)).astype(np.float32)
+    data = (1 + 0.05 * rng.standard_normal(model.view_shape)).astype(np.float32)
+    value, grad = model.misfit(model.bk.asarray(dn), model.bk.asarray(data))
+    return model.bk.to_host(model.views(model.bk.asarray(dn))), value, model.bk.to_host(grad)
+
+
+@needs_gpu
+def test_gpu_multislice_model_matches_the_cpu():
+    (v_cpu, f_cpu, g_cpu), (v_gpu, f_gpu, g_gpu) = _multislice_on("cpu"), _multislice_on("gpu")
+    assert np.max(np.abs(v_gpu - v_cpu)) <= 1e-4 * np.abs(v_cpu).max()
+    assert f_gpu == pytest.approx(f_cpu, rel=1e-4)
+    assert np.max(np.abs(g_gpu - g_cpu)) <= 1e-3 * np.abs(g_cpu).max()

@@ -93,7 +93,12 @@ def smoothed_tv(x, voxel_um, eps: float, xp):
     grad : ndarray, like ``x``
         Σ_a D_aᵀ (D_a x / sqrt(|∇x|² + ε²)).
     """
-    diffs = [xp.diff(x, axis=a, append=xp.take(x, [-1], axis=a)) / h for a, h in enumerate(voxel_um)]
+    diffs = []
+    for a, h in enumerate(voxel_um):
+        d = xp.zeros_like(x)
+        xa, da = xp.moveaxis(x, a, 0), xp.moveaxis(d, a, 0)  # views
+        da[:-1] = (xa[1:] - xa[:-1]) / h
+        diffs.append(d)
     norm = xp.sqrt(sum(d * d for d in diffs) + eps * eps)
     out = xp.zeros_like(x)
     for a, (d, h) in enumerate(zip(diffs, voxel_um)):
