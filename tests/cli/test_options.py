@@ -44,3 +44,17 @@ def test_a_generated_flag_is_checked_by_its_model():
 
     with pytest.raises(SsdpcError, match="iterations"):
         config_from_args(_parser().parse_args(["--multislice-iterations", "0"]), None)
+
+
+def test_the_chosen_methods_alpha_is_resolved_in_one_place():
+    """'--alpha' (the '*' section) lands in the section of the method chosen on the same line, also
+    for multislice (its start is tv's), through the same merge napari and RunConfig.of use."""
+    from napari_ssdpc.settings.reconstruction import merge_settings
+
+    for method, section in (("wotf", "wotf"), ("rl", "rl"), ("multislice", "tv")):
+        rec = config_from_args(_parser().parse_args(["--method", method, "--alpha", "0.7"]), None).reconstruction
+        assert getattr(rec, section).alpha == 0.7 and rec.alpha == 0.7
+    base = ReconstructionSettings().to_dict()
+    merged = merge_settings(base, {"*": {"alpha": 0.2}, "method": "wotf", "tv": {"iterations": 9}})
+    assert merged["wotf"]["alpha"] == 0.2 and merged["tv"]["alpha"] == base["tv"]["alpha"]
+    assert merged["tv"] == {**base["tv"], "iterations": 9} and base["tv"]["iterations"] != 9  # a copy

@@ -17,7 +17,7 @@ from napari_ssdpc.reconstruction.methods import METHODS
 from napari_ssdpc.settings.config import RunConfig
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.settings.outputs import SAVE_CHOICES, OutputSettings
-from napari_ssdpc.settings.reconstruction import DEFAULT_Z_UM, ReconstructionSettings, alpha_section
+from napari_ssdpc.settings.reconstruction import DEFAULT_Z_UM, ReconstructionSettings, merge_settings
 
 __all__ = ["FLAGS", "add_reconstruction_options", "config_from_args"]
 
@@ -157,23 +157,21 @@ def config_from_args(args: argparse.Namespace, optics: Optics | None, fallback: 
         cfg = RunConfig.from_yaml(args.config, default_optics=fallback)
     else:
         cfg = RunConfig(optics=fallback or Optics.paper())
-    data = cfg.reconstruction.to_dict()
-    method = getattr(args, "method", None) or data["method"]
+    changes: dict = {}
     for flag, key in FLAGS.items():
         value = getattr(args, _dest(flag), None)
         if value is None:
             continue
         section, _, name = key.rpartition(".")
         if section:
-            section = alpha_section(method) if section == "*" else section
-            data[section] = {**data[section], name: value}
+            changes.setdefault(section, {})[name] = value
         else:
-            data[name] = value
+            changes[name] = value
     if getattr(args, "z", None) is not None:
-        data.update(z_min_um=float(args.z[0]), z_max_um=float(args.z[1]))
+        changes.update(z_min_um=float(args.z[0]), z_max_um=float(args.z[1]))
     if getattr(args, "roi", None) is not None:
-        data["multislice"] = {**data["multislice"], "roi_um": [float(v) for v in args.roi]}
-    rec = ReconstructionSettings.from_dict(data, source="command line")
+        changes.setdefault("multislice", {})["roi_um"] = [float(v) for v in args.roi]
+    rec = ReconstructionSettings.from_dict(merge_settings(cfg.reconstruction.to_dict(), changes), source="command line")
     outputs = cfg.outputs
     changes = {k: getattr(args, k, None) for k in ("save", "store_digits")}
     if any(v is not None for v in changes.values()):

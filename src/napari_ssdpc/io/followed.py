@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
+from napari_ssdpc.io.frames import complete_pages
 
 __all__ = ["FollowedFrames", "kind_of_recording"]
 
@@ -203,13 +204,7 @@ class FollowedFrames:
 
         try:
             with tifffile.TiffFile(self.path) as tif:
-                n = 0
-                for page in tif.pages:
-                    offsets, counts = getattr(page, "dataoffsets", ()), getattr(page, "databytecounts", ())
-                    if not offsets or any(o + c > size for o, c in zip(offsets, counts)):
-                        break
-                    n += 1
-                return n
+                return complete_pages(tif.pages, size)
         except Exception:  # a header being written: nothing readable yet
             return 0
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.files import file_times, os_error
+from napari_ssdpc.io.frames import complete_pages
 
 __all__ = ["StoredFrames", "PagedSeries"]
 
@@ -203,9 +204,9 @@ def _open_tiff(path: Path):
         frames = int(np.prod(series.shape[:-2])) if len(series.shape) > 2 else 1
         if len(tif.pages) < frames and not tif.is_imagej:
             raise SsdpcError(f"{path}: truncated ({len(tif.pages)} of {frames} frames); copy the file again")
-        for k, page in enumerate(tif.pages):  # a truncated copy: refuse it now, not at frame k
-            if any(o + n > size for o, n in zip(page.dataoffsets, page.databytecounts)):
-                raise SsdpcError(f"{path}: truncated (page {k} ends beyond the file's end); copy the file again")
+        k = complete_pages(tif.pages, size)  # a truncated copy: refuse it now, not at frame k
+        if k < len(tif.pages):
+            raise SsdpcError(f"{path}: truncated (page {k} ends beyond the file's end); copy the file again")
     except SsdpcError:
         raise
     except Exception as e:  # tifffile raises many types for foreign or truncated files

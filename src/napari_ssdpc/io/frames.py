@@ -19,6 +19,7 @@ from napari_ssdpc.files import atomic_write_set
 
 __all__ = [
     "TiffInfo",
+    "complete_pages",
     "read_frame",
     "tiff_info",
     "write_ome_tiff",
@@ -112,11 +113,32 @@ def _info(tif, size: int) -> TiffInfo:
 def _complete(series, size: int) -> bool:
     """Whether the pixels of a series' last page lie inside a file of ``size`` bytes."""
     pages = series.pages
-    last = pages[len(pages) - 1] if len(pages) else None
-    if last is None:
-        return False
-    ends = [o + n for o, n in zip(last.dataoffsets, last.databytecounts)]
-    return bool(ends) and max(ends) <= size and all(n > 0 for n in last.databytecounts)
+    return bool(len(pages)) and complete_pages([pages[len(pages) - 1]], size) == 1
+
+
+def complete_pages(pages, size: int) -> int:
+    """How many of the leading ``pages`` hold all their pixels inside a file of ``size`` bytes.
+
+    A page whose data run past the file's end, or that has none yet (a header being written),
+    ends the count: the file was cut short or is still being written.
+
+    Parameters
+    ----------
+    pages : iterable of tifffile.TiffPage
+    size : int
+        The file's size, bytes.
+
+    Returns
+    -------
+    int
+    """
+    n = 0
+    for page in pages:
+        offsets, counts = getattr(page, "dataoffsets", ()), getattr(page, "databytecounts", ())
+        if not offsets or any(c <= 0 or o + c > size for o, c in zip(offsets, counts)):
+            break
+        n += 1
+    return n
 
 
 def read_frame(path, *, allow_series: bool = True, name: str = "frame") -> np.ndarray:

@@ -23,7 +23,7 @@ from napari_ssdpc.settings.base import SettingsModel
 from napari_ssdpc.settings.files import read_mapping
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.settings.outputs import OutputSettings
-from napari_ssdpc.settings.reconstruction import ReconstructionSettings
+from napari_ssdpc.settings.reconstruction import ReconstructionSettings, merge_settings
 
 __all__ = ["RunConfig"]
 
@@ -65,10 +65,7 @@ class RunConfig(SettingsModel):
         save = [save] if isinstance(save, str) else save
         rec = reconstruction or ReconstructionSettings()
         if changes:
-            data = rec.to_dict()
-            for key, value in changes.items():
-                old = data.get(key)
-                data[key] = {**old, **value} if isinstance(value, dict) and isinstance(old, dict) else value
+            data = merge_settings(rec.to_dict(), changes)
             rec = ReconstructionSettings.from_dict(data, source="reconstruction settings")
         return cls(
             optics=optics,

@@ -41,6 +41,7 @@ __all__ = [
     "TvSettings",
     "WotfSettings",
     "alpha_section",
+    "merge_settings",
     "plane_count",
 ]
 
@@ -89,6 +90,41 @@ def alpha_section(method: str) -> str:
     str
     """
     return "tv" if method == "multislice" else method
+
+
+def merge_settings(data: dict, changes: dict) -> dict:
+    """Reconstruction settings (as a dict) with ``changes`` applied: the one place where the
+    command line, napari's widgets and :meth:`RunConfig.of` change settings.
+
+    A top-level key is replaced; a method's section is merged key by key; the section ``'*'`` is
+    the chosen method's own (the one that holds its Tikhonov α, :func:`alpha_section`), resolved
+    after ``method`` itself has changed.
+
+    Parameters
+    ----------
+    data : dict
+        ``ReconstructionSettings.to_dict()`` (or a file's ``reconstruction:`` section).
+    changes : dict
+        Keys and sections to change.
+
+    Returns
+    -------
+    dict
+        A new dict; validate it with ``ReconstructionSettings.from_dict``.
+    """
+    out = dict(data)
+    star: dict = {}
+    for key, value in changes.items():
+        if key == "*":
+            star.update(value)
+        elif isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = {**out[key], **value}
+        else:
+            out[key] = value
+    if star:
+        section = alpha_section(str(out.get("method", "tv")))
+        out[section] = {**(out.get(section) or {}), **star}
+    return out
 
 
 def _alpha(default: float, scale: str) -> Any:

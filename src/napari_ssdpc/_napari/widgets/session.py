@@ -20,7 +20,7 @@ from napari_ssdpc.pipeline.job import Job
 from napari_ssdpc.settings.config import RunConfig
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.settings.outputs import OutputSettings
-from napari_ssdpc.settings.reconstruction import ReconstructionSettings, alpha_section
+from napari_ssdpc.settings.reconstruction import ReconstructionSettings, merge_settings
 
 __all__ = [
     "Session",
@@ -93,19 +93,11 @@ class Session:
         -------
         ReconstructionSettings
         """
-        data = self.base.to_dict()
-        star: dict = {}
-        for w in self._widgets():
+        changes: dict = {}
+        for w in self._widgets():  # every widget's keys first: '*' is the method the dock ends with
             for key, value in w.settings_changes().items():
-                if key == "*":
-                    star.update(value)
-                elif isinstance(value, dict):
-                    data[key] = {**data[key], **value}
-                else:
-                    data[key] = value
-        if star:
-            section = alpha_section(data["method"])
-            data[section] = {**data[section], **star}
+                changes[key] = {**changes.get(key, {}), **value} if isinstance(value, dict) else value
+        data = merge_settings(self.base.to_dict(), changes)
         return ReconstructionSettings.from_dict(data, source="the dock's settings")
 
     def config(self, save=()) -> RunConfig:
