@@ -36,6 +36,11 @@ def main(argv=None) -> dict:
     args = ap.parse_args(argv)
 
     report: dict = {"machine": machine(), "devices": {d: get_backend(d).name for d in args.devices}, "rows": {}}
+
+    def save():  # after every row: a run cut short keeps what it measured
+        if args.json:
+            args.json.write_text(json.dumps(report, indent=1, default=str))
+
     case = simulated_case("bench-pmma-bead", TV_NA, args.cache)
     cal = calibrate(case.white, case.optics)
     dn: dict = {}
@@ -56,6 +61,7 @@ def main(argv=None) -> dict:
             dn[(name, device)] = np.asarray(res.delta_n, np.float64)
             report["rows"][f"{name}_{device}"] = row
             print(f"{name:10s} {device}: build {row['build_s']:.2f} s, frame {row['frame_s']:.3f} s", flush=True)
+            save()
     if "cpu" in args.devices and "gpu" in args.devices:
         for name in ("wotf", "tv", "multislice"):
             a, b = dn[(name, "cpu")], dn[(name, "gpu")]
@@ -72,8 +78,8 @@ def main(argv=None) -> dict:
                 row = series_stage(mcase, mcal, cfg, device, TV_SERIES_FRAMES, stacks=False, warm_start=warm)
                 report["rows"][f"{key}_{device}"] = row
                 print(f"{key} {device}: {row['steady_frames_per_s']:.2f} frames/s in steady state", flush=True)
-    if args.json:
-        args.json.write_text(json.dumps(report, indent=1, default=str))
+                save()
+    save()
     return report
 
 
