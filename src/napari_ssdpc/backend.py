@@ -124,34 +124,24 @@ class Backend:
         return self.fft.irfft2(a, s=s, **self._kw(norm))
 
     def fft2(self, a, s=None, norm=None):
-        """Complex 2D FFT over the last two axes (threaded on the CPU).
+        """Complex 2D FFT over the last two axes, (..., P, Q) -> complex (..., P, Q) (or ``s``).
 
         Parameters
         ----------
-        a : ndarray, (..., P, Q)
+        a : ndarray
         s : (int, int), optional
-            Padded shape.
         norm : {None, 'ortho'}
-
-        Returns
-        -------
-        ndarray, complex, (..., P, Q) or (..., *s)
         """
         return self.fft.fft2(a, s=s, **self._kw(norm))
 
     def ifft2(self, a, s=None, norm=None):
-        """Inverse of :meth:`fft2`.
+        """Inverse of :meth:`fft2` over the last two axes, complex.
 
         Parameters
         ----------
-        a : ndarray, complex, (..., P, Q)
+        a : ndarray, complex
         s : (int, int), optional
-            Output shape.
         norm : {None, 'ortho'}
-
-        Returns
-        -------
-        ndarray, complex
         """
         return self.fft.ifft2(a, s=s, **self._kw(norm))
 
@@ -232,19 +222,14 @@ class Backend:
         return self.fft.fft(a, n=n, axis=axis, **self._kw(None))
 
     def ifft(self, a, n=None, axis=-1, norm=None):
-        """Inverse of :meth:`fft_`.
+        """Inverse of :meth:`fft_`: complex, along ``axis``.
 
         Parameters
         ----------
         a : ndarray
-        n : int, optional
-            Transform length.
-        axis : int
+        n, axis
+            As :meth:`fft_`.
         norm : {None, 'ortho'}
-
-        Returns
-        -------
-        ndarray, complex
         """
         return self.fft.ifft(a, n=n, axis=axis, **self._kw(norm))
 

@@ -119,15 +119,12 @@ class ViewContrast:
         return self.level[self.lit]
 
     def linear_model(self, z_um, *, backend=None, progress=None) -> ViewModel:
-        """The first-order model of the lit views (paper Eqs. 2-4) on the planes ``z_um``.
+        """The first-order model of the lit views (paper Eqs. 2-4): each lenslet's sub-aperture.
 
         Parameters
         ----------
-        z_um : array_like, (Z,)
-            Planes, µm.
-        backend : {'cpu', 'gpu'} or Backend, optional
-        progress : callable, optional
-            ``progress(done, total, 'operators')``.
+        z_um, backend, progress
+            As :meth:`~napari_ssdpc.reconstruction.measurements.Measurements.linear_model`.
 
         Returns
         -------
@@ -145,21 +142,12 @@ class ViewContrast:
         )
 
     def multislice_model(self, z_um, dz_um: float, roi, settings, *, backend=None, max_bytes=None) -> ViewsMultislice:
-        """The multislice model of the lit views on the planes ``z_um`` and the region ``roi``.
+        """The multislice model of the lit views (their lenslets' sub-apertures, the condenser's source points).
 
         Parameters
         ----------
-        z_um : array_like, (Z,)
-            Planes, µm (evenly spaced).
-        dz_um : float
-            Their spacing, µm.
-        roi : (slice, slice)
-            Rows and columns of the views' grid the model covers (square).
-        settings : MultisliceSettings
-            Its sampling (refine, substeps, source points).
-        backend : {'cpu', 'gpu'} or Backend, optional
-        max_bytes : int, optional
-            Refuse a model that needs more memory.
+        z_um, dz_um, roi, settings, backend, max_bytes
+            As :meth:`~napari_ssdpc.reconstruction.measurements.Measurements.multislice_model`.
 
         Returns
         -------

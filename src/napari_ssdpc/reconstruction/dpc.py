@@ -81,23 +81,3 @@ def phase_to_delta_n(phase, wavelength_um: float, dz_um: float):
         Δn (no unit).
     """
     return np.asarray(phase, dtype=np.float32) * np.float32(wavelength_um / (2 * np.pi * dz_um))
-
-
-def refractive_index(phase, wavelength_um: float, dz_um: float, medium_index: float):
-    """n = n_medium + Δn.
-
-    Parameters
-    ----------
-    phase : ndarray
-        Phase per slab, rad.
-    wavelength_um : float
-        Vacuum wavelength, µm.
-    dz_um : float
-        Slab thickness, µm.
-    medium_index : float
-
-    Returns
-    -------
-    ndarray
-    """
-    return np.float32(medium_index) + phase_to_delta_n(phase, wavelength_um, dz_um)

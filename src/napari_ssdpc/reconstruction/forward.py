@@ -168,14 +168,8 @@ class ViewModel:
         optics : Optics
         lenslets : list of Lenslet
             The lit lenslets, in the order of the views.
-        shape : tuple of int
-            (ny, nx) of a view, px.
-        pixel_um : float
-            Object-side pixel of the views, µm.
-        z_um : array_like, shape (Z,)
-            Slab centres, µm.
-        **kw
-            ``i0``, ``progress``, ``chunk``, ``backend`` as for :class:`ViewModel`.
+        shape, pixel_um, z_um, **kw
+            As for :class:`ViewModel`.
 
         Returns
         -------

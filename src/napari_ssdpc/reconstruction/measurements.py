@@ -59,6 +59,7 @@ class Measurements(Protocol):
             Planes, µm.
         backend : {'cpu', 'gpu'} or Backend, optional
         progress : callable, optional
+            ``progress(done, total, 'operators')`` while it is built.
         """
         ...
 
@@ -68,13 +69,15 @@ class Measurements(Protocol):
         Parameters
         ----------
         z_um : array_like, (Z,)
-            Planes, µm.
+            Planes, µm (evenly spaced).
         dz_um : float
             Their spacing, µm.
         roi : (slice, slice)
-            Rows and columns of the views' grid it covers.
+            Rows and columns of the views' grid it covers (square).
         settings : MultisliceSettings
+            Its sampling (refine, substeps, source points).
         backend : {'cpu', 'gpu'} or Backend, optional
         max_bytes : int, optional
+            Refuse a model that needs more memory (:class:`~napari_ssdpc.errors.SsdpcError`).
         """
         ...

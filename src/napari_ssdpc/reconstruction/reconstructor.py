@@ -27,7 +27,7 @@ from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.physics.design import design
 from napari_ssdpc.reconstruction import checks, memory
 from napari_ssdpc.reconstruction.contrast import ViewContrast
-from napari_ssdpc.reconstruction.dpc import phase_to_delta_n, refractive_index
+from napari_ssdpc.reconstruction.dpc import phase_to_delta_n
 from napari_ssdpc.reconstruction.methods import method_class
 from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
 from napari_ssdpc.reconstruction.stacks import DirectionalStacks
@@ -322,7 +322,7 @@ class Reconstructor:
         t3 = time.perf_counter()
         history = {**({} if stacks is None else stacks.history), **sol.history}
         return Result(
-            ri=refractive_index(phase, self.optics.wavelength_um, self.dz, self.optics.medium_index),
+            ri=np.float32(self.optics.medium_index) + dn,  # n = n_medium + Δn
             delta_n=dn,
             phase=phase,
             absorption=None if stacks is None else stacks.absorption,
