@@ -230,3 +230,22 @@ def test_views_match_the_simulator(optics, phantom, dz, refine, ms_max, fo_min):
     assert err_fo > fo_min
     if fo_min >= 0.5:  # strong objects: the multislice model must beat the first-order one by far
         assert err_ms < 0.3 * err_fo
+
+
+def test_every_model_samples_the_one_pupil(optics):
+    """The transfer functions' soft-edged sub-aperture, the simulator's cell fractions and the
+    multislice model's hard edges are samplings of one Pupil: they agree on its area."""
+    from napari_ssdpc.physics.apertures import subaperture_windows
+    from napari_ssdpc.physics.pupil import Pupil, subaperture_pupil
+
+    pupil = Pupil.of(optics)
+    edge = [ln for ln in nominal_lenslets(optics) if 0.3 < ln.fraction < 0.9][0]  # cut by the objective's edge
+    du = pupil.rho / 40
+    soft, _, _ = subaperture_pupil(optics, edge.u, (128, 128), du)
+    _, cells = subaperture_windows([edge.u], pupil, du, 128)
+    t = (np.arange(128 * 4) - 256 + 0.5) * du / 4
+    hard = pupil.subaperture(edge.u[0] + t[None, :], edge.u[1] + t[:, None], edge.u)
+    areas = [soft.sum() * du**2, (cells[0] ** 2).sum() * du**2, hard.sum() * (du / 4) ** 2]
+    full = math.pi * pupil.rho**2
+    assert 0.3 * full < areas[0] < 0.9 * full
+    np.testing.assert_allclose(areas, areas[0], rtol=2e-3)

@@ -2,8 +2,8 @@
 
 - The objective pupil P_obj(u) = circ(|u| ≤ NA/λ) and the sub-aperture of lenslet k,
   A_k(u) = P_obj(u)·circ(|u − u_k| ≤ ρ) (paper Eq. 2), sampled as the exact area fraction of each
-  lattice cell inside them (``physics.pupil.subaperture_pupil`` samples the same aperture with a
-  linear edge ramp instead).
+  lattice cell inside them (the apertures of :class:`~napari_ssdpc.physics.pupil.Pupil`, which
+  ``physics.pupil.subaperture_pupil`` samples with a linear edge ramp instead).
 - Köhler illumination sampled as plane waves on the lattice (Abbe's method, paper Eq. 2): source
   points over the condenser disk |w| ≤ NA_c/λ, each weighted by the area of its cell in the disk,
   and per lenslet by the part of the cell on the lit side of that lenslet's edge.
@@ -18,13 +18,13 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
+from napari_ssdpc.physics.pupil import Pupil
+
 __all__ = [
     "cell_fraction",
     "disk_fraction",
-    "in_subaperture",
     "kohler_source",
     "lenslet_source_weights",
-    "objective_pupil_cells",
     "subaperture_windows",
 ]
 
@@ -87,30 +87,8 @@ def disk_fraction(x, y, radius, pixel, supersample=8):
     return out
 
 
-def in_subaperture(ux, uy, u_k, rho: float, cutoff: float) -> np.ndarray:
-    """Whether u lies in the sub-aperture A_k = P_obj · circ(|u − u_k| ≤ ρ) (paper Eq. 2).
-
-    Parameters
-    ----------
-    ux, uy : ndarray
-        Frequencies (broadcastable), cycles/µm.
-    u_k : array_like, (2,)
-        The lenslet's sub-aperture centre (x, y), cycles/µm.
-    rho : float
-        Sub-aperture radius ρ, cycles/µm.
-    cutoff : float
-        Objective cut-off NA/λ, cycles/µm.
-
-    Returns
-    -------
-    ndarray, bool
-        The broadcast shape of ``ux`` and ``uy``.
-    """
-    return ((ux - u_k[0]) ** 2 + (uy - u_k[1]) ** 2 <= rho * rho) & (ux * ux + uy * uy <= cutoff * cutoff)
-
-
 def lenslet_source_weights(
-    w, spacing: float, radius: float, u_centres, rho: float, cutoff: float, supersample=8, max_samples=250_000
+    w, spacing: float, radius: float, u_centres, pupil: Pupil, supersample=8, max_samples=250_000
 ):
     """Per-lenslet weights of lattice source points, so each lenslet's bright-field edge is exact.
 
@@ -133,10 +111,8 @@ def lenslet_source_weights(
         Condenser disk radius NA_c/λ, cycles/µm.
     u_centres : array_like, (K, 2)
         Sub-aperture centres u_k (x, y), cycles/µm.
-    rho : float
-        Sub-aperture radius ρ, cycles/µm.
-    cutoff : float
-        Objective cut-off NA/λ, cycles/µm.
+    pupil : Pupil
+        The objective pupil and the sub-apertures' radius.
     supersample : int
         Samples of the disk per lattice step.
     max_samples : int
@@ -157,8 +133,8 @@ def lenslet_source_weights(
     v = np.stack([sx[keep], sy[keep]], axis=1)
     out = np.zeros((len(w), len(u_centres)))
     for k, u_k in enumerate(np.asarray(u_centres, float)):
-        bright_v = in_subaperture(v[:, 0], v[:, 1], u_k, rho, cutoff)
-        bright_w = in_subaperture(w[:, 0], w[:, 1], u_k, rho, cutoff)
+        bright_v = pupil.subaperture(v[:, 0], v[:, 1], u_k)
+        bright_w = pupil.subaperture(w[:, 0], w[:, 1], u_k)
         for side in (True, False):
             pts = np.flatnonzero(bright_w == side)
             if not len(pts):  # no point on this side: the nearest of any side carries it
@@ -170,29 +146,7 @@ def lenslet_source_weights(
     return out
 
 
-def objective_pupil_cells(u2, cutoff: float, du: float) -> np.ndarray:
-    """The objective pupil on a lattice of step ``du``: every cell that touches |u| ≤ NA/λ passes.
-
-    Its exact (area-weighted) edge is applied by the sub-apertures (:func:`subaperture_windows`).
-
-    Parameters
-    ----------
-    u2 : ndarray
-        |u|² of the lattice, (cycles/µm)².
-    cutoff : float
-        NA/λ, cycles/µm.
-    du : float
-        Lattice step, cycles/µm.
-
-    Returns
-    -------
-    ndarray, float32, shape of ``u2``
-        1 or 0.
-    """
-    return (u2 <= (cutoff + du / math.sqrt(2)) ** 2).astype(np.float32)
-
-
-def subaperture_windows(u_centres, rho: float, cutoff: float, du: float, nc: int, supersample: int = 8):
+def subaperture_windows(u_centres, pupil: Pupil, du: float, nc: int, supersample: int = 8):
     """Each lenslet's sub-aperture A_k on an ``nc`` x ``nc`` crop of the lattice around u_k.
 
     The crop is centred on the lattice point nearest u_k; each cell passes the amplitude
@@ -202,10 +156,8 @@ def subaperture_windows(u_centres, rho: float, cutoff: float, du: float, nc: int
     ----------
     u_centres : array_like, (K, 2)
         Sub-aperture centres u_k (x, y), cycles/µm.
-    rho : float
-        Sub-aperture radius ρ, cycles/µm.
-    cutoff : float
-        Objective cut-off NA/λ, cycles/µm.
+    pupil : Pupil
+        The objective pupil and the sub-apertures' radius.
     du : float
         Lattice step, cycles/µm.
     nc : int
@@ -227,7 +179,7 @@ def subaperture_windows(u_centres, rho: float, cutoff: float, du: float, nc: int
         ux, uy = (c[0] + off) * du, (c[1] + off) * du
 
         def inside(sx, sy, u_k=u_k):
-            return in_subaperture(sx, sy, u_k, rho, cutoff)
+            return pupil.subaperture(sx, sy, u_k)
 
         centres.append(c)
         apert.append(np.sqrt(cell_fraction(inside, ux[None, :], uy[:, None], du, supersample)))

@@ -23,7 +23,7 @@ from napari_ssdpc.backend import cpu
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.geometry import nominal_lenslets
 from napari_ssdpc.physics.lattice import Grid
-from napari_ssdpc.physics.pupil import axial_frequency, soft_disk
+from napari_ssdpc.physics.pupil import Pupil, axial_frequency, soft_disk
 from napari_ssdpc.physics.waves import transfer_function
 from napari_ssdpc.settings.lenslets import Lenslet
 from napari_ssdpc.settings.optics import Optics
@@ -167,7 +167,7 @@ def _pupil_field_on_mla(optics: Optics, xs, ys, dx):
     """Objective pupil imaged onto the MLA (x_mla = −λ f_obj m_r u) and η at each sample."""
     scale = optics.wavelength_um * optics.f_obj_um * optics.m_r
     ux, uy = -xs[None, :] / scale, -ys[:, None] / scale
-    pupil = soft_disk(np.hypot(xs[None, :], ys[:, None]), optics.pupil_radius_mla_um, dx)
+    pupil = Pupil.of(optics).objective(ux, uy, step=dx / scale)
     return pupil.astype(complex), axial_frequency(ux, uy, optics)
 
 

@@ -3,7 +3,11 @@
 - η(u) = sqrt((n/λ)² − |u|²), the axial spatial frequency in the medium (a plane wave
   exp(i2π(u·x + η z)) propagates toward +z, docs/conventions.md);
 - the anti-aliased disk of the pupils and the source;
-- the sub-aperture pupil of lenslet k, P_k(u) = P_obj(u)·circ(|u − u_k| ≤ ρ) (paper Eq. 6);
+- :class:`Pupil`, the one definition of the detection pupil: the objective's P_obj(u) = circ(|u| ≤ NA/λ)
+  and the sub-aperture of lenslet k, A_k(u) = P_obj(u)·circ(|u − u_k| ≤ ρ) (paper Eqs. 2 and 6),
+  which the transfer functions, the PSF, the multislice model and the simulator all sample (with
+  hard edges, a one-sample edge ramp, or the area fraction of a lattice cell);
+- the sub-aperture pupil of lenslet k on a grid around u_k (:func:`subaperture_pupil`);
 - the parallax vector t_k = <u/η(u)>_{|P_k|²}: a point at depth z appears displaced by z·t_k in the
   EI of lenslet k (the |P_k|²-weighted mean tanθ·û).
 """
@@ -11,6 +15,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.fft as sfft
@@ -18,7 +23,7 @@ import scipy.fft as sfft
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.settings.optics import Optics
 
-__all__ = ["axial_frequency", "eta", "mean_tilt", "soft_disk", "subaperture_pupil"]
+__all__ = ["Pupil", "axial_frequency", "eta", "mean_tilt", "soft_disk", "subaperture_pupil"]
 
 
 def soft_disk(dist, radius, step):
@@ -28,7 +33,7 @@ def soft_disk(dist, radius, step):
     Parameters
     ----------
     dist : array_like
-        Distance of each sample from the disk's centre (any unit).
+        Distance of each sample from the disk's centre (any unit); NumPy or CuPy.
     radius : float
         The disk's radius, same unit.
     step : float
@@ -39,7 +44,8 @@ def soft_disk(dist, radius, step):
     ndarray
         Values in [0, 1], shaped like ``dist``.
     """
-    return np.clip(0.5 + (radius - np.asarray(dist)) / step, 0.0, 1.0)
+    d = dist if hasattr(dist, "clip") else np.asarray(dist)  # NumPy or CuPy arrays as they are
+    return (0.5 + (radius - d) / step).clip(0.0, 1.0)
 
 
 def eta(u2, n_medium: float, wavelength_um: float) -> np.ndarray:
@@ -79,6 +85,102 @@ def axial_frequency(ux, uy, optics: Optics) -> np.ndarray:
     return eta(np.asarray(ux) ** 2 + np.asarray(uy) ** 2, optics.medium_index, optics.wavelength_um).real
 
 
+@dataclass(frozen=True)
+class Pupil:
+    """The detection pupil of every view: the objective's pupil cut by each lenslet's sub-aperture.
+
+    P_obj(u) = circ(|u| ≤ NA/λ) and A_k(u) = P_obj(u)·circ(|u − u_k| ≤ ρ) (paper Eqs. 2 and 6;
+    docs/conventions.md for u_k). The nominal optics give the ideal pupil (:meth:`of`); what a real
+    instrument adds (a phase over P_obj, each lenslet's own centre and radius) belongs here, so that
+    every model that samples the pupil sees it.
+
+    Attributes
+    ----------
+    cutoff : float
+        NA/λ, the objective's cut-off, cycles/µm.
+    rho : float
+        ρ, a lenslet's sub-aperture radius, cycles/µm.
+    """
+
+    cutoff: float
+    rho: float
+
+    @classmethod
+    def of(cls, optics: Optics) -> Pupil:
+        """The pupil of the nominal optics.
+
+        Parameters
+        ----------
+        optics : Optics
+
+        Returns
+        -------
+        Pupil
+        """
+        return cls(float(optics.cutoff), float(optics.subaperture_radius))
+
+    def objective(self, ux, uy, step: float | None = None, xp=np):
+        """P_obj at (ux, uy): hard-edged (bool), or with ``step`` its edge a linear ramp one sample wide.
+
+        Parameters
+        ----------
+        ux, uy : ndarray
+            Frequencies, cycles/µm (broadcastable).
+        step : float, optional
+            The sampling step, cycles/µm (:func:`soft_disk`).
+        xp : module
+            NumPy or CuPy.
+
+        Returns
+        -------
+        ndarray, bool, or float in [0, 1] with ``step``
+        """
+        if step is None:
+            return ux * ux + uy * uy <= self.cutoff * self.cutoff
+        return soft_disk(xp.hypot(ux, uy), self.cutoff, step)
+
+    def subaperture(self, ux, uy, u_k, step: float | None = None, xp=np):
+        """A_k = P_obj · circ(|u − u_k| ≤ ρ) at (ux, uy) (hard-edged, or ramped with ``step``).
+
+        Parameters
+        ----------
+        ux, uy : ndarray
+            Frequencies, cycles/µm (broadcastable).
+        u_k : array_like, (2,) or broadcastable pair
+            The sub-aperture's centre (x, y), cycles/µm.
+        step : float, optional
+            The sampling step, cycles/µm.
+        xp : module
+            NumPy or CuPy.
+
+        Returns
+        -------
+        ndarray, bool, or float in [0, 1] with ``step``
+        """
+        dx, dy = ux - u_k[0], uy - u_k[1]
+        if step is None:
+            return (dx * dx + dy * dy <= self.rho * self.rho) & self.objective(ux, uy)
+        return soft_disk(xp.hypot(dx, dy), self.rho, step) * self.objective(ux, uy, step, xp)
+
+    def objective_cells(self, u2, du: float) -> np.ndarray:
+        """P_obj on a lattice of step ``du``: every cell that touches |u| ≤ NA/λ passes (its exact,
+        area-weighted edge is applied by the sub-apertures).
+
+        Parameters
+        ----------
+        u2 : ndarray
+            |u|² of the lattice, (cycles/µm)².
+        du : float
+            Lattice step, cycles/µm.
+
+        Returns
+        -------
+        ndarray, float32, shape of ``u2``
+            1 or 0.
+        """
+        return (u2 <= (self.cutoff + du / math.sqrt(2)) ** 2).astype(np.float32)
+
+
 def subaperture_pupil(optics: Optics, u_k, shape, du):
     """P_k = P_obj·circ(|u − u_k| ≤ ρ) on the grid u = u_k + fftfreq (unshifted FFT order).
 
@@ -107,10 +209,7 @@ def subaperture_pupil(optics: Optics, u_k, shape, du):
     fy = sfft.fftfreq(ny, 1.0 / (ny * duy))[:, None]
     fx = sfft.fftfreq(nx, 1.0 / (nx * dux))[None, :]
     ux, uy = u_k[0] + fx, u_k[1] + fy
-    step = math.sqrt(dux * duy)
-    p = soft_disk(np.hypot(fx, fy), optics.subaperture_radius, step)
-    p = p * soft_disk(np.hypot(ux, uy), optics.cutoff, step)
-    return p, ux, uy
+    return Pupil.of(optics).subaperture(ux, uy, u_k, step=math.sqrt(dux * duy)), ux, uy
 
 
 def mean_tilt(optics: Optics, pupil, ux, uy) -> np.ndarray:

@@ -35,7 +35,7 @@ import scipy.fft as sfft
 
 from napari_ssdpc.backend import cpu
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.physics.pupil import axial_frequency, soft_disk, subaperture_pupil
+from napari_ssdpc.physics.pupil import Pupil, axial_frequency, soft_disk, subaperture_pupil
 from napari_ssdpc.settings.optics import Optics
 
 __all__ = [
@@ -276,7 +276,7 @@ def paper_transfer_functions(optics: Optics, shape, pixel_um, z_um=0.0):
     fx = (_fft_indices(m_in[1]) * du[1])[None, :]
     step = math.sqrt(du[0] * du[1])
     disk = soft_disk(np.hypot(fx, fy), optics.source_radius, step)
-    pupil = soft_disk(np.hypot(fx, fy), r, step).astype(complex)
+    pupil = Pupil.of(optics).objective(fx, fy, step).astype(complex)
     eta = axial_frequency(fx, fy, optics)
     norm = _disk_power(optics.source_radius, du)
     # "up" sees u_y > 0 (docs/conventions.md); the half-plane edge gets half weight

@@ -59,7 +59,7 @@ import scipy.fft as sfft
 from napari_ssdpc.backend import Backend, get_backend
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.apertures import disk_fraction, kohler_source, lenslet_source_weights
-from napari_ssdpc.physics.pupil import eta
+from napari_ssdpc.physics.pupil import Pupil, eta
 from napari_ssdpc.physics.waves import defocus_factor
 from napari_ssdpc.settings.optics import Optics
 
@@ -233,10 +233,11 @@ class ViewsMultislice:
         t = ((np.arange(q) + 0.5) / q - 0.5) * h
         w_sub = w[:, None] + np.stack(np.meshgrid(t, t), axis=-1).reshape(1, q * q, 2)  # (S, Q, 2)
         u_k = np.array([ln.u for ln in lenslets] if not isinstance(lenslets, np.ndarray) else lenslets, float)
-        self.rho, self.cut = optics.subaperture_radius, optics.cutoff
+        self.pupil = Pupil.of(optics)
+        self.rho = self.pupil.rho
         flat_sub = w_sub.reshape(-1, 2)
         if edge_weights:  # (S·Q, K): each lenslet's bright-field edge sampled finely
-            wgt = lenslet_source_weights(flat_sub, h / q, optics.source_radius, u_k, self.rho, self.cut)
+            wgt = lenslet_source_weights(flat_sub, h / q, optics.source_radius, u_k, self.pupil)
         else:
             cell = disk_fraction(flat_sub[:, 0], flat_sub[:, 1], optics.source_radius, h / q) * (h / q) ** 2
             wgt = np.repeat(cell[:, None], len(u_k), axis=1)
@@ -266,10 +267,6 @@ class ViewsMultislice:
         uy = w_sub[:, :, None, 1, None] + ey[:, None] * du
         inx = ((ex >= -(n // 2)) & (ex < n - n // 2))[:, None]  # inside the grid's band
         iny = ((ey >= -(n // 2)) & (ey < n - n // 2))[:, None]
-        # |u − u_k|² and |u|² per axis, with +inf where out of band: A_k = 0 there
-        big = np.float32(np.inf)
-        dx2 = np.where(inx, (ux - u_k[None, None, :, 0, None]) ** 2, big).astype(np.float32)
-        dy2 = np.where(iny, (uy - u_k[None, None, :, 1, None]) ** 2, big).astype(np.float32)
         self.z_exit, self._k2 = z_exit, (nm / lam) ** 2
         eta0 = np.sqrt(self._k2 - np.sum(w_sub**2, axis=-1))  # η(w') of every sub-point, (S, Q)
         # --- intensity: m-crop grid -> the views' pixels (Fourier interpolation, pixel sinc) -----
@@ -280,8 +277,9 @@ class ViewsMultislice:
         self._h = xp_.asarray(h_slab.astype(self.cdtype))
         self._wgt = xp_.asarray(wgt.astype(self.rdtype))
         self._ey, self._ex = xp_.asarray(ey % n), xp_.asarray(ex % n)
-        self._dx2, self._dy2 = xp_.asarray(dx2), xp_.asarray(dy2)
-        self._rx2, self._ry2 = xp_.asarray((ux**2).astype(np.float32)), xp_.asarray((uy**2).astype(np.float32))
+        self._ux, self._uy = xp_.asarray(ux.astype(np.float32)), xp_.asarray(uy.astype(np.float32))
+        self._inx, self._iny = xp_.asarray(inx), xp_.asarray(iny)
+        self._uk = tuple(xp_.asarray(u_k[:, i].astype(np.float32))[:, None, None] for i in range(2))
         self._eta0 = xp_.asarray(eta0.astype(np.float32))[..., None, None, None]
         self._band = xp_.asarray(fm % nv)
         self._pix = xp_.asarray((pix[:, None] * pix[None, :]).astype(self.rdtype))
@@ -330,8 +328,11 @@ class ViewsMultislice:
         ``sl``: A_k(u) exp(i2π z_exit [η(u) − η(w')]) at u = w' + crop frequency for every sub-point
         w' (paper Eqs. 2 and 6), zero outside the grid's band, (s, Q, K, m, m), complex."""
         xp = self.xp
-        u2 = self._ry2[sl][..., :, None] + self._rx2[sl][..., None, :]
-        inside = (self._dy2[sl][..., :, None] + self._dx2[sl][..., None, :] <= self.rho**2) & (u2 <= self.cut**2)
+        ux, uy = self._ux[sl][..., None, :], self._uy[sl][..., :, None]
+        inside = (
+            self.pupil.subaperture(ux, uy, self._uk, xp=xp) & self._iny[sl][..., :, None] & self._inx[sl][..., None, :]
+        )
+        u2 = ux * ux + uy * uy
         phase = (2 * math.pi * self.z_exit) * (xp.sqrt(xp.maximum(self._k2 - u2, 0)) - self._eta0[sl])
         return (inside * xp.exp(1j * phase)).astype(self.cdtype)
 

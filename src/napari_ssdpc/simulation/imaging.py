@@ -22,9 +22,9 @@ import numpy as np
 from scipy import ndimage
 
 from napari_ssdpc.backend import cpu
-from napari_ssdpc.physics.apertures import disk_fraction, objective_pupil_cells, subaperture_windows
+from napari_ssdpc.physics.apertures import disk_fraction, subaperture_windows
 from napari_ssdpc.physics.lattice import Grid
-from napari_ssdpc.physics.pupil import eta
+from napari_ssdpc.physics.pupil import Pupil, eta
 from napari_ssdpc.physics.waves import defocus_factor
 from napari_ssdpc.simulation.camera import Camera
 from napari_ssdpc.simulation.multislice import even_fast
@@ -71,9 +71,8 @@ class Imager:
         self.optics, self.sampling, self.lenslets = optics, sampling, lenslets
         self.nc = crop_size(optics, sampling)
         # A_k = P_obj · P_k on each lenslet's crop (|amplitude|² = area fraction of the cell)
-        self.centres, self.apert = subaperture_windows(
-            [ln.u for ln in lenslets], optics.subaperture_radius, optics.cutoff, sampling.du, self.nc
-        )
+        pupil = Pupil.of(optics)
+        self.centres, self.apert = subaperture_windows([ln.u for ln in lenslets], pupil, sampling.du, self.nc)
         self.off = np.arange(self.nc) - self.nc // 2
         self.acc = np.zeros((len(lenslets), self.nc, self.nc), dtype=np.float64)
         n = sampling.n
@@ -84,7 +83,7 @@ class Imager:
         u2 = u[None, :] ** 2 + u[:, None] ** 2
         # objective pupil before the iris, absolute lattice in FFT order: every cell that touches the
         # pupil passes; the exact (anti-aliased) pupil edge is applied with A_k after the iris
-        self.pupil = objective_pupil_cells(u2, optics.cutoff, sampling.du)
+        self.pupil = pupil.objective_cells(u2, sampling.du)
         self.eta = eta(u2, optics.medium_index, optics.wavelength_um)
         self.scale = (self.nc / n) ** 4 / (math.pi * optics.subaperture_radius**2)
 

@@ -10,8 +10,8 @@ import scipy.fft as sfft
 from scipy import special
 
 from napari_ssdpc.backend import cpu
-from napari_ssdpc.physics.apertures import in_subaperture
 from napari_ssdpc.physics.lattice import Grid
+from napari_ssdpc.physics.pupil import Pupil
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation.camera import Camera
 from napari_ssdpc.simulation.imaging import Imager, array_as_built, crop_size, render
@@ -67,12 +67,12 @@ def white_intensity(
 
 def _incoherent_otf(u_k, optics, du, nc, q=4):
     """Normalised autocorrelation of A_k = P_obj · P_k at lags that are multiples of du."""
-    rho, cut = optics.subaperture_radius, optics.cutoff
+    rho = optics.subaperture_radius
     d = du / q
     m = int(math.ceil((rho + 2 * du) / d))
     t = np.arange(-m, m + 1) * d
     sx, sy = u_k[0] + t[None, :], u_k[1] + t[:, None]
-    a = in_subaperture(sx, sy, u_k, rho, cut).astype(float)
+    a = Pupil.of(optics).subaperture(sx, sy, u_k).astype(float)
     N = sfft.next_fast_len(2 * len(t) + 1)
     ac = cpu().ifft2(np.abs(cpu().fft2(a, s=(N, N))) ** 2).real
     lag = (np.fft.fftfreq(nc, 1.0 / nc).astype(int) * q) % N

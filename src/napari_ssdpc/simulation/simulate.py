@@ -22,9 +22,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from napari_ssdpc.physics.apertures import in_subaperture
 from napari_ssdpc.physics.lattice import Grid
-from napari_ssdpc.physics.pupil import mean_tilt
+from napari_ssdpc.physics.pupil import Pupil, mean_tilt
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation.camera import Camera
 from napari_ssdpc.simulation.imaging import Imager, array_as_built, render
@@ -186,5 +185,5 @@ def effective_tan_theta(optics: Optics, lenslet, supersample: int = 400) -> np.n
     rho = optics.subaperture_radius
     t = np.linspace(-rho, rho, supersample)
     ux, uy = np.meshgrid(lenslet.u[0] + t, lenslet.u[1] + t)
-    a = in_subaperture(ux, uy, lenslet.u, rho, optics.cutoff)
+    a = Pupil.of(optics).subaperture(ux, uy, lenslet.u)
     return mean_tilt(optics, a[a].astype(float), ux[a], uy[a])  # tanθ·û = u/η(u), averaged over A_k
