@@ -60,6 +60,45 @@ def _view_geometry(calibration: Calibration, size):
     return ii, jj, step, px
 
 
+@dataclass(frozen=True, eq=False)
+class ViewGrid:
+    """The upright object grid every view is resampled on (no frame needed).
+
+    Attributes
+    ----------
+    x_um, y_um : ndarray, (w,), (h,)
+        Pixel centres, µm from the EI centre (the optical axis in the object).
+    mask : ndarray of bool, (h, w)
+        The iris disk (the field stop), True inside.
+    pixel_um : float
+        Object-side pixel, µm.
+    """
+
+    x_um: np.ndarray
+    y_um: np.ndarray
+    mask: np.ndarray
+    pixel_um: float
+
+
+def view_grid(calibration: Calibration, size=None) -> ViewGrid:
+    """The grid :func:`extract_views` resamples every EI on, from the calibration alone.
+
+    Parameters
+    ----------
+    calibration : Calibration
+    size : int, optional
+        View size (h = w), px; default the EI diameter on the object grid.
+
+    Returns
+    -------
+    ViewGrid
+    """
+    ii, jj, step, px = _view_geometry(calibration, size)
+    J, I = np.meshgrid(jj, ii)
+    mask = (J**2 + I**2) * step**2 <= calibration.ei_radius_px**2
+    return ViewGrid(jj * px, ii * px, mask, px)
+
+
 def extract_views(frame, calibration: Calibration, size=None, *, order: int = 1) -> Views:
     """Stack of EIs (K, h, w) float32, resampled upright on the object grid.
 
@@ -95,14 +134,14 @@ def extract_views(frame, calibration: Calibration, size=None, *, order: int = 1)
         img, [ys.ravel(), xs.ravel()], order=order, mode="constant", cval=0.0, prefilter=order > 1
     )
     data = data.reshape(len(c), len(ii), len(jj)).astype(np.float32)
-    mask = (J**2 + I**2) * step**2 <= cal.ei_radius_px**2
+    grid = view_grid(cal, size)
     return Views(
         data=data,
         lenslets=list(cal.lenslets),
         centres_px=c.copy(),
-        x_um=jj * px,
-        y_um=ii * px,
-        mask=mask,
+        x_um=grid.x_um,
+        y_um=grid.y_um,
+        mask=grid.mask,
         pixel_um=px,
         frame_shape=(int(cal.frame_shape[0]), int(cal.frame_shape[1])),
     )

@@ -15,7 +15,7 @@ import numpy as np
 
 from napari_ssdpc.calibration.result import Calibration
 from napari_ssdpc.calibration.saturation import warn_saturation
-from napari_ssdpc.calibration.views import extract_views
+from napari_ssdpc.calibration.views import extract_views, view_grid
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics import transfer
 from napari_ssdpc.physics.views_multislice import ViewsMultislice
@@ -76,7 +76,7 @@ class ViewContrast:
             raise SsdpcError(f"min_light = {min_light!r}: give a fraction of the brightest lenslet's light, 0 to 1")
         self.dark = None if dark is None else float(dark)
         cal = calibration
-        geom = extract_views(np.zeros(cal.frame_shape, np.float32), cal)
+        geom = view_grid(cal)  # the views' grid, from the calibration alone
         self.mask = geom.mask
         self.x_um, self.y_um, self.pixel_um = geom.x_um, geom.y_um, geom.pixel_um
         fv = None
