@@ -358,3 +358,23 @@ def test_the_methods_read_the_light_field_views_through_measurements(reconstruct
     ms = views.multislice_model([-2.0, 0.0, 2.0], 2.0, roi, MultisliceSettings(refine=1, source_spacing_na=0.05))
     assert isinstance(ms, NonlinearModel) and ms.view_shape == (len(views.lit), 16, 16)
     np.testing.assert_allclose(ms.views(np.zeros(ms.shape, np.float32)), 1.0, atol=1e-4)
+
+
+def test_the_refinement_reuses_the_tv_answer_of_the_same_frame(case, calibration):
+    """'tv', then its multislice refinement on the same Reconstructor: no operator is rebuilt and
+    'tv' is not solved again (napari and the demo refine the answer on screen); another frame, or
+    a plain 'tv' run, solves anew; going back to 'tv' takes the same built method."""
+    more = {"iterations": 2, "stop_residual_over_noise": 0.0}
+    rec = Reconstructor(run_config(case.optics, z=(-30, 30), dz=2, multislice=more), calibration, flat=case.flat)
+    tv_method = rec.method
+    first = rec.reconstruct(case.frame)
+    assert "tv_reused" not in first.settings and rec.reconstruct(case.frame).settings.get("tv_reused") is None
+    config = run_config(case.optics, z=(-30, 30), dz=2, method="multislice", multislice=more)
+    assert rec.adopt(config) and rec.method.name == "multislice" and rec.method.start is tv_method
+    refined = rec.reconstruct(case.frame)
+    assert refined.settings["tv_reused"] is True and refined.settings["multislice_iterations_run"] == 2
+    assert refined.settings["tv_iterations_run"] == first.settings["tv_iterations_run"]
+    other = rec.reconstruct(np.roll(case.frame, 1, axis=0))  # another frame: its own tv solve
+    assert "tv_reused" not in other.settings
+    assert rec.adopt(run_config(case.optics, z=(-30, 30), dz=2)) and rec.method is tv_method
+    assert not rec.adopt(run_config(case.optics, z=(-30, 30), dz=2, method="wotf"))  # other operators

@@ -215,7 +215,9 @@ class Reconstructor:
         self.build_seconds = time.perf_counter() - t0
 
     def adopt(self, config: RunConfig) -> bool:
-        """Take ``config`` for the next frames if its operators are these (only runtime keys differ).
+        """Take ``config`` for the next frames if its operators are these: only runtime keys differ, or
+        the method becomes the refinement of this one ('tv' -> 'multislice', whose next solve of the
+        frame 'tv' just solved reuses that answer) or the method this one refines.
 
         Parameters
         ----------
@@ -226,16 +228,28 @@ class Reconstructor:
         bool
             False where the operators would differ: build a new Reconstructor.
         """
-        same = config.optics == self.optics and (
-            config.reconstruction.operator_key() == self.config.reconstruction.operator_key()
-        )
-        if not same or (config.outputs.needs_stacks and self.stacks is None):
+        new, old = config.reconstruction.operator_key(), self.config.reconstruction.operator_key()
+        method = self._method_for(config.reconstruction.method)
+        same = config.optics == self.optics and {**new, "method": ""} == {**old, "method": ""}
+        if not same or method is None or (config.outputs.needs_stacks and self.stacks is None):
             return False
         self.config = config
         self._setup.settings = config.reconstruction
+        self.method = method
         if self.stacks is not None:
             self.stacks.settings = config.reconstruction.rl
         return True
+
+    def _method_for(self, name: str) -> PhaseMethod | None:
+        """The built method ``name`` from this one's operators: itself, the method it refines
+        ('multislice' -> 'tv'), or its refinement ('tv' -> 'multislice'); None: build anew."""
+        m = self.method
+        if m.name == name:
+            return m
+        if m.start is not None and m.start.name == name:
+            return m.start
+        cls = method_class(name)
+        return cls.on(m) if cls.starts_from == m.name else None
 
     # the views' geometry, for writers and widgets
     @property

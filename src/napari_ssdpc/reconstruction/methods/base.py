@@ -61,12 +61,15 @@ class Solution:
         Convergence curves ({name: list of float}).
     state : object
         What a warm start of the next frame reuses (the phase, solver variables).
+    method : str
+        The method that solved it.
     """
 
     phase: np.ndarray
     report: dict = field(default_factory=dict)
     history: dict = field(default_factory=dict)
     state: Any = None
+    method: str = ""
 
 
 class PhaseMethod(ABC):
@@ -80,6 +83,8 @@ class PhaseMethod(ABC):
 
     name: ClassVar[str]
     uses_stacks: ClassVar[bool] = False
+    #: The method whose answer this one refines (built once and shared: :meth:`on`), or None.
+    starts_from: ClassVar[str | None] = None
 
     @classmethod
     def build(cls, setup: Setup, progress=None) -> PhaseMethod:
@@ -124,7 +129,29 @@ class PhaseMethod(ABC):
         if should_stop is not None and should_stop():
             raise Cancelled("reconstruction cancelled")
         sol.phase = np.asarray(sol.phase, np.float32)
+        sol.method = self.name
         return sol
+
+    @classmethod
+    def on(cls, start: PhaseMethod) -> PhaseMethod:
+        """This method built on an already built ``start`` method (its :attr:`starts_from`), sharing
+        its operators: switching from 'tv' to its refinement rebuilds nothing.
+
+        Parameters
+        ----------
+        start : PhaseMethod
+            A built method of the kind :attr:`starts_from` names.
+
+        Returns
+        -------
+        PhaseMethod
+        """
+        raise NotImplementedError(f"the '{cls.name}' method does not start from another method")
+
+    @property
+    def start(self) -> PhaseMethod | None:
+        """The built method this one refines (None for a method of its own)."""
+        return None
 
     @classmethod
     @abstractmethod

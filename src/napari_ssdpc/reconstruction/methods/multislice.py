@@ -22,6 +22,7 @@ z, which no object explains, are left out; outside the region the 'tv' solution 
 
 from __future__ import annotations
 
+import json
 import math
 import time
 
@@ -159,18 +160,42 @@ class MultisliceMethod(PhaseMethod):
     """'tv', then a nonlinear fit of a multislice model of the views in a region around the objects."""
 
     name = "multislice"
+    starts_from = "tv"
 
     def __init__(self, setup: Setup, tv: TvMethod):
         self.setup, self.tv = setup, tv
+        self._models: dict = {}  # the last models of the views, by region and planes
 
     @classmethod
     def _build(cls, setup, progress):
-        return cls(setup, TvMethod.build(setup, progress))  # the model itself is built per frame
+        return cls(setup, TvMethod.build(setup, progress))  # the models of the views: per region
+
+    @classmethod
+    def on(cls, start: PhaseMethod) -> MultisliceMethod:
+        """The refinement of a built 'tv' method (its operators and its last solve shared).
+
+        Parameters
+        ----------
+        start : TvMethod
+
+        Returns
+        -------
+        MultisliceMethod
+        """
+        if not isinstance(start, TvMethod):
+            raise TypeError(f"the multislice refinement starts from 'tv', not '{start.name}'")
+        return cls(start.setup, start)
+
+    @property
+    def start(self) -> TvMethod:
+        """The 'tv' method it refines."""
+        return self.tv
 
     def _solve(self, views, stacks, warm, progress, should_stop):
         s, v = self.setup, self.setup.views
         ms, bk = s.settings.multislice, s.backend
-        start = self.tv.solve(views, warm=warm, progress=progress, should_stop=should_stop)
+        # the tv answer of this frame when it was just computed (napari, the demo), else solved now
+        start = self.tv.solve_or_reuse(views, warm=warm, progress=progress, should_stop=should_stop)
         t0 = time.perf_counter()
         to_dn = s.optics.wavelength_um / (2 * math.pi * s.dz_um)  # Δn = λφ/(2π dz)
         dn = np.asarray(start.phase, np.float32) * to_dn
@@ -255,7 +280,18 @@ class MultisliceMethod(PhaseMethod):
         return Solution((dn / to_dn).astype(np.float32), out, history, state=start.state)
 
     def _model(self, planes: slice, rows: slice, cols: slice) -> ViewsMultislice:
-        """The multislice model of the views on ``planes`` of the output grid and the region (rows, cols)."""
+        """The multislice model of the views on ``planes`` of the output grid and the region (rows, cols):
+        built once for a region and kept while the frames of a series need the same (the last two)."""
+        s = self.setup
+        where = (planes.start, planes.stop, rows.start, rows.stop, cols.start, cols.stop)
+        key = json.dumps([where, s.settings.multislice.to_dict()], sort_keys=True, default=str)
+        if key not in self._models:
+            while len(self._models) >= 2:
+                self._models.pop(next(iter(self._models)))
+            self._models[key] = self._build_model(planes, rows, cols)
+        return self._models[key]
+
+    def _build_model(self, planes: slice, rows: slice, cols: slice) -> ViewsMultislice:
         s = self.setup
         return s.views.multislice_model(
             s.z_um[planes],

@@ -7,6 +7,8 @@ docs/method.md).
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import warnings
 
@@ -43,6 +45,36 @@ class TvMethod(PhaseMethod):
 
     def __init__(self, setup: Setup, wotf: WotfInversion, tv: TvInversion):
         self.setup, self.wotf, self.tv = setup, wotf, tv
+        self._last: tuple[str, Solution] | None = None  # the last frame's solve, for a refinement
+
+    def _key(self, views, warm: Solution | None) -> str:
+        """What a solve depends on beyond the operators: the views, the start and the tv settings."""
+        h = hashlib.blake2b(np.ascontiguousarray(views, np.float32).tobytes(), digest_size=16)
+        if warm is not None:
+            h.update(np.ascontiguousarray(warm.phase, np.float32).tobytes())
+        h.update(json.dumps(self.setup.settings.tv.to_dict(), sort_keys=True).encode())
+        return h.hexdigest()
+
+    def solve_or_reuse(self, views, *, warm: Solution | None = None, progress=None, should_stop=None) -> Solution:
+        """:meth:`solve`, or this method's last solution when it was of the same views, start and
+        settings (a refinement after the 'tv' answer of the same frame: no second solve, no sign probes).
+
+        Parameters
+        ----------
+        views : ndarray, float32, (K, ny, nx)
+        warm : Solution, optional
+        progress, should_stop : callable, optional
+            As :meth:`solve`.
+
+        Returns
+        -------
+        Solution
+            Its report says ``tv_reused`` when it is the last solve's.
+        """
+        if self._last is not None and self._last[0] == self._key(views, warm):
+            last = self._last[1]
+            return Solution(last.phase, {**last.report, "tv_reused": True}, last.history, last.state, last.method)
+        return self.solve(views, warm=warm, progress=progress, should_stop=should_stop)
 
     @classmethod
     def _build(cls, setup, progress):
@@ -87,7 +119,9 @@ class TvMethod(PhaseMethod):
                 SsdpcWarning,
                 stacklevel=2,
             )
-        return Solution(phi, out, history, state=report.state)
+        solution = Solution(phi, out, history, state=report.state, method=self.name)
+        self._last = (self._key(views, warm), solution)
+        return solution
 
     def settings(self) -> dict:
         """The Tikhonov α of the start."""
