@@ -25,11 +25,12 @@ from __future__ import annotations
 import json
 import math
 import time
+import warnings
 
 import numpy as np
 from scipy import ndimage
 
-from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.physics.views_multislice import ViewsMultislice, square_roi
 from napari_ssdpc.reconstruction.memory import available_memory
 from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
@@ -276,6 +277,16 @@ class MultisliceMethod(PhaseMethod):
         dn[:, rows, cols] = 0.0  # the model holds the objects: the first-order tails are gone
         dn[planes, rows, cols] = bk.to_host(x)
         out = report(fit, model, result.x, result.history, result.converged)
+        stopped = should_stop is not None and should_stop()
+        if not result.converged and not stopped:
+            warnings.warn(
+                f"the multislice fit did not converge in {result.iterations} iterations: the views are "
+                f"{out['multislice_residual_over_noise'] or float('nan'):.1f} x the noise from the model (it stops at "
+                f"{stop:.1f}); its Δn may still be off: raise the multislice iterations "
+                "(--multislice-iterations, or the run configuration's multislice: iterations)",
+                SsdpcWarning,
+                stacklevel=2,
+            )
         history = {**start.history, "multislice": result.history}
         return Solution((dn / to_dn).astype(np.float32), out, history, state=start.state)
 
