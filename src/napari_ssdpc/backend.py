@@ -123,7 +123,7 @@ class Backend:
         """
         return self.fft.irfft2(a, s=s, **self._kw(norm))
 
-    def fft2(self, a, s=None, norm=None):
+    def fft2(self, a, s=None, norm=None, overwrite_x: bool = False):
         """Complex 2D FFT over the last two axes, (..., P, Q) -> complex (..., P, Q) (or ``s``).
 
         Parameters
@@ -131,10 +131,12 @@ class Backend:
         a : ndarray
         s : (int, int), optional
         norm : {None, 'ortho'}
+        overwrite_x : bool
+            ``a`` may be destroyed (saves a copy of a large complex array on the CPU).
         """
-        return self.fft.fft2(a, s=s, **self._kw(norm))
+        return self.fft.fft2(a, s=s, overwrite_x=overwrite_x, **self._kw(norm))
 
-    def ifft2(self, a, s=None, norm=None):
+    def ifft2(self, a, s=None, norm=None, overwrite_x: bool = False):
         """Inverse of :meth:`fft2` over the last two axes, complex.
 
         Parameters
@@ -142,8 +144,10 @@ class Backend:
         a : ndarray, complex
         s : (int, int), optional
         norm : {None, 'ortho'}
+        overwrite_x : bool
+            As :meth:`fft2`.
         """
-        return self.fft.ifft2(a, s=s, **self._kw(norm))
+        return self.fft.ifft2(a, s=s, overwrite_x=overwrite_x, **self._kw(norm))
 
     def rfftn(self, a, norm=None):
         """Real FFT over every axis.

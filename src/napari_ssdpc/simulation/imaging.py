@@ -112,9 +112,9 @@ class Imager:
         e0 = self.eta[idx[1] % n, idx[0] % n].real
         F *= np.roll(self._prop, (-int(idx[1]), -int(idx[0])), axis=(0, 1))  # index i -> u_i + w
         F *= np.complex64(np.exp(-2j * np.pi * z_exit * e0))
-        img = cpu().ifft2(F)
+        img = cpu().ifft2(F, overwrite_x=True)
         img *= self.mask
-        return cpu().fft2(img)
+        return cpu().fft2(img, overwrite_x=True)
 
     def empty_spectrum(self, idx):
         """Spectrum after the iris of an unperturbed plane wave (no sample).
