@@ -18,14 +18,16 @@ LAYERS = [
     ("settings/", "Optics, ReconstructionSettings (one section per\nmethod), OutputSettings, RunConfig", 0, (0, 3)),
     (
         "physics/",
-        "design, lattice, lenslet geometry, pupils, waves, PSF (Eq. 6),\nWOTFs (Eqs. 2-4), multislice model of the views",
+        "design, lattice, lenslet geometry, pupils, waves, PSF (Eq. 6),\n"
+        "WOTFs (Eqs. 2-4), multislice model of the views",
         1,
         (0, 3),
     ),
     ("calibration/", "EI disks, lattice, optical axis,\ncalibrate(), extract_views()", 2, (0, 1.45)),
     (
         "reconstruction/",
-        "Reconstructor; Measurements (views once), stacks;\nmethods/ registry: tv | wotf | rl | multislice; nonlinear solver",
+        "Reconstructor; Measurements (views once), stacks;\n"
+        "methods/ registry: tv | wotf | rl | multislice; nonlinear solver",
         2,
         (1.55, 3),
     ),
@@ -59,7 +61,12 @@ def main() -> None:
         ax.text((x0 + x1) / 2, row + 0.52, name, ha="center", va="center", fontsize=10, weight="bold")
         ax.text((x0 + x1) / 2, row + 0.22, what, ha="center", va="center", fontsize=7.5)
     ax.text(
-        1.5, 4.6, "errors.py · files.py · progress.py · statistics.py · backend.py (NumPy | CuPy, the one FFT entry): used by every layer", ha="center", fontsize=8
+        1.5,
+        4.6,
+        "errors.py · files.py · progress.py · statistics.py · backend.py (NumPy | CuPy, the one FFT entry): "
+        "used by every layer",
+        ha="center",
+        fontsize=8,
     )
     bx.set_xlim(0, 1)
     bx.set_ylim(-0.5, len(STEPS))
