@@ -7,10 +7,9 @@ docs/method.md).
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 import warnings
+import weakref
 
 import numpy as np
 
@@ -45,15 +44,19 @@ class TvMethod(PhaseMethod):
 
     def __init__(self, setup: Setup, wotf: WotfInversion, tv: TvInversion):
         self.setup, self.wotf, self.tv = setup, wotf, tv
-        self._last: tuple[str, Solution] | None = None  # the last frame's solve, for a refinement
+        # the last frame's solve, for a refinement: (views, weak reference to its warm start or None,
+        # tv settings, solution)
+        self._last: tuple | None = None
 
-    def _key(self, views, warm: Solution | None) -> str:
-        """What a solve depends on beyond the operators: the views, the start and the tv settings."""
-        h = hashlib.blake2b(np.ascontiguousarray(views, np.float32).tobytes(), digest_size=16)
-        if warm is not None:
-            h.update(np.ascontiguousarray(warm.phase, np.float32).tobytes())
-        h.update(json.dumps(self.setup.settings.tv.to_dict(), sort_keys=True).encode())
-        return h.hexdigest()
+    def _is_last(self, views, warm: Solution | None) -> bool:
+        """Whether the last solve had these views, this start and these settings (nothing is
+        hashed per frame: the views are kept by reference and compared only when asked)."""
+        if self._last is None:
+            return False
+        last_views, last_warm, settings, _ = self._last
+        same_start = warm is None if last_warm is None else last_warm() is warm
+        same_views = last_views.shape == np.shape(views) and np.array_equal(last_views, views)
+        return same_start and settings == self.setup.settings.tv.to_dict() and same_views
 
     def solve_or_reuse(self, views, *, warm: Solution | None = None, progress=None, should_stop=None) -> Solution:
         """:meth:`solve`, or this method's last solution when it was of the same views, start and
@@ -71,8 +74,8 @@ class TvMethod(PhaseMethod):
         Solution
             Its report says ``tv_reused`` when it is the last solve's.
         """
-        if self._last is not None and self._last[0] == self._key(views, warm):
-            last = self._last[1]
+        if self._last is not None and self._is_last(views, warm):
+            last = self._last[3]
             return Solution(last.phase, {**last.report, "tv_reused": True}, last.history, last.state, last.method)
         return self.solve(views, warm=warm, progress=progress, should_stop=should_stop)
 
@@ -120,7 +123,8 @@ class TvMethod(PhaseMethod):
                 stacklevel=2,
             )
         solution = Solution(phi, out, history, state=report.state, method=self.name)
-        self._last = (self._key(views, warm), solution)
+        start = None if warm is None else weakref.ref(warm)  # a series' previous frame is not kept alive
+        self._last = (views, start, self.setup.settings.tv.to_dict(), solution)
         return solution
 
     def settings(self) -> dict:
