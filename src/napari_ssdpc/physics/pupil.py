@@ -112,10 +112,12 @@ class Pupil:
         Parameters
         ----------
         optics : Optics
+            Its NA, wavelength and sub-aperture radius.
 
         Returns
         -------
         Pupil
+            Ideal: no aberration, every lenslet at its nominal place.
         """
         return cls(float(optics.cutoff), float(optics.subaperture_radius))
 

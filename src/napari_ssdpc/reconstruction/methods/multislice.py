@@ -178,10 +178,12 @@ class MultisliceMethod(PhaseMethod):
         Parameters
         ----------
         start : TvMethod
+            Built, with its setup.
 
         Returns
         -------
         MultisliceMethod
+            Its start is ``start`` itself.
         """
         if not isinstance(start, TvMethod):
             raise TypeError(f"the multislice refinement starts from 'tv', not '{start.name}'")
