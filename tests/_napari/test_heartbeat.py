@@ -19,6 +19,10 @@ from napari_ssdpc._napari import notify as _notify
 
 BEAT_MS = 50
 MAX_STALL_S = 1.0  # generous for a CI machine; a quiet 2-core machine measures about 0.7 s (docs/napari.md)
+#: napari alone adding three 1024 x 1024 images (what opening the sample costs it): 0.4 s on the quiet
+#: 2-core machine the bound was set on. A display that makes napari itself slower than this cannot
+#: tell the plugin's stalls from its own (docs/napari.md): the test says so and skips.
+REFERENCE_MAX_S = 0.6
 
 
 def _busy() -> str:
@@ -48,6 +52,26 @@ def test_the_event_loop_keeps_beating_through_the_whole_workflow(make_napari_vie
     timer.start(BEAT_MS)
     qtbot.wait(300)
     out = {}
+
+    def napari_alone():
+        for i in range(3):
+            viewer.add_image(np.zeros((1024, 1024), np.uint16), name=f"reference {i}")
+
+    step[0] = "napari alone"
+    QTimer.singleShot(0, napari_alone)
+    qtbot.wait(800)
+    step[0] = "idle"
+    reference = max((t1 - t0 for (t0, _), (t1, n) in zip(beats, beats[1:]) if n == "napari alone"), default=0.0)
+    for i in range(3):
+        viewer.layers.remove(f"reference {i}")
+    qtbot.wait(300)
+    print(f"napari alone, three 1024 x 1024 images: longest gap {reference:.2f} s")
+    if reference > REFERENCE_MAX_S:
+        timer.stop()
+        pytest.skip(
+            f"napari itself stalls {reference:.2f} s adding three images on this display (at most "
+            f"{REFERENCE_MAX_S} s for the 1 s bound): too slow to measure the plugin's stalls"
+        )
 
     def run(name, action, widget=None, settle_ms=500):
         step[0] = name
@@ -98,7 +122,8 @@ def test_the_event_loop_keeps_beating_through_the_whole_workflow(make_napari_vie
     assert shown == []
     gaps = {}
     for (t0, _), (t1, name) in zip(beats, beats[1:]):
-        gaps[name] = max(gaps.get(name, 0.0), t1 - t0)
+        if name != "napari alone":
+            gaps[name] = max(gaps.get(name, 0.0), t1 - t0)
     print("longest gap between beats per step, s:", {k: round(v, 2) for k, v in gaps.items()})
     steps = {"open the dock", "open the sample", "calibrate", "reconstruct", "draw a profile", "look at the slices"}
     assert set(gaps) >= steps | {"reconstruct a series", "export a movie"}
