@@ -164,13 +164,17 @@ class LiveFollow:
         """
         from napari_ssdpc.io.store import done_frames
 
+        try:  # the frames the display below can show (none while the store is being created)
+            done = [int(t) for t in done_frames(store)] if Path(store).exists() else []
+        except Exception:  # a store half created by the worker: nothing done yet, shown on the next beat
+            done = []
         before = self.rc.shown_frames
         self.rc.show_store(store)
         source = self.source
         if source is None or self.rc.shown_frames == before:
             return
-        now = time.time()
-        new = [int(t) for t in done_frames(store) if t in self.written_s and t not in self.shown_s]
+        now = time.time()  # after the display, and after every write time counted below was taken
+        new = [t for t in done if t in self.written_s and t not in self.shown_s]
         for t in new:
             self.shown_s[t] = now - source.arrived_at[t]
         if new and self.rc.runner.running:
