@@ -8,7 +8,7 @@ import pytest
 
 from napari_ssdpc.simulation.phantoms import Sphere
 from napari_ssdpc.validation.figures import comparison_figure
-from napari_ssdpc.validation.mass import mass_and_tail
+from napari_ssdpc.validation.mass import mass_and_tail, masses_and_false
 from napari_ssdpc.validation.truth import truth_volume
 
 MEDIUM = 1.518
@@ -62,3 +62,21 @@ def test_comparison_figure_draws_each_method(bead, tmp_path):
 
     w, h = Image.open(path).size
     assert w > 900 and h > 500  # two rows of three panels
+
+
+def test_two_spheres_on_one_axis_each_keep_their_mass_and_a_floor_is_false(bead):
+    _, _, (z, y, x) = bead
+    lower, upper = Sphere((0.0, 0.0, -12.0), 5.0, 1.6), Sphere((0.0, 0.0, 12.0), 5.0, 1.6)
+    empty = _result(np.zeros((z.size, y.size, x.size)), z, y, x)
+    both = truth_volume(lower, empty, MEDIUM) + truth_volume(upper, empty, MEDIUM)
+    m = masses_and_false(_result(both, z, y, x), [lower, upper], MEDIUM)
+    assert m["masses"] == pytest.approx([1.0, 1.0]) and m["false"] == 0.0
+    assert m["centroids_z_um"] == pytest.approx([0.0, 0.0], abs=0.05)
+    only_upper = truth_volume(upper, empty, MEDIUM)
+    floor = np.full(both.shape, 1e-4)  # a floor of Δn over the whole volume
+    m = masses_and_false(_result(only_upper + floor, z, y, x), [lower, upper], MEDIUM)
+    assert m["masses"][0] < 0.1 and m["masses"][1] > 1.0  # the lower one gone; the floor adds to both
+    away = floor.sum() - floor[0, 0, 0] * 2 * np.count_nonzero(
+        (np.hypot(*np.meshgrid(y, x, indexing="ij")) <= 6.5)[None] & (np.abs(z - 12)[:, None, None] <= 10.5)
+    )
+    assert m["false"] == pytest.approx(away / (2 * only_upper.sum()), rel=1e-6)

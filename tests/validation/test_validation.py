@@ -14,7 +14,8 @@ import pytest
 from napari_ssdpc.simulation import phantoms as ph
 from napari_ssdpc.validation import cases as val
 from napari_ssdpc.validation import truth as vt
-from napari_ssdpc.validation.mass import mass_and_tail
+from napari_ssdpc.validation.mass import mass_and_tail, masses_and_false
+from napari_ssdpc.validation.truth import truth_volume
 
 pytestmark = pytest.mark.slow
 
@@ -156,28 +157,69 @@ def silica(cache):
             res, _, _ = val.reconstruct_case(case, z=(-30, 30), method=method)
         said = [str(w.message) for w in caught]
         m = mass_and_tail(res, sphere, 1.333)
-        out[method] = (res, m["integrated"], m["tail"], vt.bead_metrics(res, sphere, 1.333), said)
+        m.update(masses_and_false(res, [sphere], 1.333))
+        m["whole"] = float(res.delta_n.sum() / truth_volume(sphere, res, 1.333).sum())
+        out[method] = (res, m, vt.bead_metrics(res, sphere, 1.333), said)
     return out
 
 
 def test_multislice_keeps_a_strong_beads_mass_where_tv_loses_it(silica):
-    """docs/nonlinear.md: integrated Δn 0.83 x the truth with 'multislice' against 0.18 x with 'tv'
-    (which warns and names the method), its depth within 1 µm (measured −0.41), no tail along z
-    (0.00), stopped at 3.1 x the noise (3 plus the model's share of the contrast; tv: 267 x)."""
+    """docs/nonlinear.md: integrated Δn 0.64 x the truth with 'multislice' against 0.18 x with 'tv'
+    (which warns and names the method), its depth within 1 µm (measured +0.46), no floor over its
+    region (the whole volume 0.88 x the truth; 2.94 x before the region's edge was held at the
+    medium), stopped at 3.7 x the noise (tv: 267 x)."""
     tv, ms = silica["tv"], silica["multislice"]
-    assert tv[1] < 0.5  # the first-order model loses most of the mass
-    assert any("--method multislice" in m for m in tv[4])
-    assert not any("--method multislice" in m for m in ms[4])
-    assert ms[1] > 0.75 and ms[2] < 0.1
-    assert abs(ms[3]["centroid_um"][2]) < 1.0
+    assert tv[1]["integrated"] < 0.5  # the first-order model loses most of the mass
+    assert any("--method multislice" in m for m in tv[3])
+    assert not any("--method multislice" in m for m in ms[3])
+    assert ms[1]["integrated"] > 2 * tv[1]["integrated"]
+    assert abs(ms[2]["centroid_um"][2]) < 1.0
+    assert 0.5 < ms[1]["whole"] < 1.2  # no floor over the model's region
     s = ms[0].settings
     assert s["multislice_residual_over_noise"] < 5 < tv[0].settings["tv_residual_over_noise"] / 10
+    bead = s["multislice_objects"][0]  # the largest
+    assert np.allclose(bead["centre_um"][:2], 0.0, atol=0.5) and abs(bead["centre_um"][2]) < 1.5
 
 
 @pytest.mark.xfail(
     strict=True,
-    reason="measured 0.83 x the truth at the default stop (3.13 x the noise, 41 iterations); on the views' "
-    "grid 0.93 x stopped at 3.5 and 1.04 x at 3, where the larger objects overshoot (docs/nonlinear.md)",
+    reason="measured 0.64 x the truth over the bead's disk (all planes), 0.47 x near it, tail 0.37, false Δn "
+    "0.41 x its mass: with every plane free the fit puts part of the bead at ±15 µm, where it explains the "
+    "model's error (docs/nonlinear.md)",
 )
-def test_multislice_strong_bead_mass_within_10_percent(silica):
-    assert abs(silica["multislice"][1] - 1.0) < 0.1
+def test_multislice_strong_bead_mass_within_10_percent_and_no_tail(silica):
+    m = silica["multislice"][1]
+    assert abs(m["integrated"] - 1.0) < 0.1 and m["tail"] < 0.1 and m["false"] < 0.1
+
+
+@pytest.fixture(scope="module")
+def stacked(cache):
+    """Two silica-like 5 µm beads in water on one axis, at z −12 and +12 µm, with 'multislice'."""
+    beads = [ph.Sphere((0.0, 0.0, z), 5.0, 1.463, medium_index=1.333) for z in (-12.0, 12.0)]
+    case = val.simulate_case(
+        "stacked-silica", ph.Spheres(beads, medium_index=1.333), val.paper_optics(0.25), cache_dir=cache
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res, _, _ = val.reconstruct_case(case, z=(-30, 30), method="multislice")
+    return res, masses_and_false(res, beads, 1.333)
+
+
+def test_multislice_keeps_both_beads_on_one_axis(stacked):
+    """docs/validation.md: 0.47 and 0.55 x each bead's mass near it (the bead above held 0.22 x, all
+    of it floor, when the model kept one depth window per footprint), over every plane."""
+    res, m = stacked
+    assert min(m["masses"]) > 0.3
+    assert res.settings["multislice_z_um"] == [-30.0, 30.0]
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured 0.47 and 0.55 x each bead's mass, depths +3.2 and −2.6 µm from the truth (drawn toward "
+    "each other and joined: the fit's report sees one object of 61 pg at z −0.2 µm for 90 pg), false Δn 0.36",
+)
+def test_multislice_stacked_beads_each_within_15_percent(stacked):
+    res, m = stacked
+    assert all(abs(v - 1) < 0.15 for v in m["masses"]) and m["false"] < 0.1
+    assert all(abs(d) < 1.0 for d in m["centroids_z_um"])
+    assert len(res.settings["multislice_objects"]) == 2

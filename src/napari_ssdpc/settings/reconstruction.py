@@ -187,7 +187,15 @@ class MultisliceSettings(SettingsModel):
 
     #: Keys read at every solve (the model is built per frame, around its objects).
     runtime: ClassVar[frozenset[str]] = frozenset(
-        {"iterations", "source_spacing_na", "source_subsamples", "substeps", "refine", "roi_margin_um", "z_margin_um"}
+        {
+            "iterations",
+            "source_spacing_na",
+            "source_subsamples",
+            "substeps",
+            "refine",
+            "roi_margin_um",
+            "medium_edge_um",
+        }
         | {"roi_um"}
         | {"tv_weight", "stop_residual_over_noise", "model_error", "unknowns"}
     )
@@ -204,8 +212,11 @@ class MultisliceSettings(SettingsModel):
         2, 1, 4, "model samples per view pixel along x and y (2: the light a strong object bends stays in band)"
     )
     roi_margin_um: float = bounded(12.0, 0.0, 500.0, "margin of the model's region around the objects, µm")
-    z_margin_um: float = bounded(
-        6.0, 0.0, 500.0, "planes the model keeps beyond each object's own extent around its depth, µm"
+    medium_edge_um: float = bounded(
+        6.0,
+        0.0,
+        250.0,
+        "band along the region's edge held at the medium (Δn 0), µm: ties every plane's mean to the medium",
     )
     roi_um: list[float] | None = Field(
         None, description="region the model covers, [x_min, x_max, y_min, y_max] µm; empty: around the objects"
@@ -228,6 +239,14 @@ class MultisliceSettings(SettingsModel):
         "rms error of the model's views relative to their contrast: the stop is raised by its share "
         "(model_error² x the views' mean squared contrast)",
     )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _retired(cls, data: Any) -> Any:
+        """Drop ``z_margin_um`` of older files: the model now covers every plane (no depth windows)."""
+        if isinstance(data, dict) and "z_margin_um" in data:
+            data = {k: v for k, v in data.items() if k != "z_margin_um"}
+        return data
 
     @model_validator(mode="after")
     def _roi(self) -> MultisliceSettings:

@@ -7,7 +7,7 @@ import numpy as np
 
 from napari_ssdpc.validation.truth import truth_volume
 
-__all__ = ["mass_and_tail"]
+__all__ = ["mass_and_tail", "masses_and_false"]
 
 
 def mass_and_tail(result, phantom, medium_index: float, margin_um: float = 4.0, tail_um: float = 8.0) -> dict:
@@ -46,3 +46,43 @@ def mass_and_tail(result, phantom, medium_index: float, margin_um: float = 4.0, 
         "integrated": float(dn[:, disk].sum() / truth),
         "tail": float(np.abs(dn[~near][:, disk]).sum() / inside) if inside > 0 else float("inf"),
     }
+
+
+def masses_and_false(result, spheres, medium_index: float, margin_um: float = 4.0, tail_um: float = 8.0) -> dict:
+    """Each sphere's integrated Δn near it against its truth, and the false Δn away from all of them.
+
+    A sphere's neighbourhood is the cylinder ``margin_um`` wider than it laterally and ``tail_um``
+    longer than it on either side along z: spheres that share an axis each keep their own.
+
+    Parameters
+    ----------
+    result : Result
+    spheres : sequence of Sphere
+        The truth.
+    medium_index : float
+    margin_um, tail_um : float
+        The neighbourhood beyond the sphere, laterally and along z, µm.
+
+    Returns
+    -------
+    dict
+        ``masses``: Σ Δn over each neighbourhood / Σ Δn of that sphere's truth (1 is exact);
+        ``centroids_z_um``: each neighbourhood's Δn-weighted depth (the sphere's sign) minus the
+        sphere's; ``false``: Σ|Δn| outside every neighbourhood / |Σ Δn| of the truth (the issue's
+        "false Δn"; 0 is exact).
+    """
+    dn = np.asarray(result.delta_n, float)
+    zz, yy, xx = np.meshgrid(result.z_um, result.y_um, result.x_um, indexing="ij")
+    anywhere = np.zeros(dn.shape, bool)
+    total, masses, depths = 0.0, [], []
+    for s in spheres:
+        cx, cy, cz = s.center_um
+        r = s.diameter_um / 2
+        near = (np.hypot(xx - cx, yy - cy) <= r + margin_um) & (np.abs(zz - cz) <= r + tail_um)
+        truth = float(truth_volume(s, result, medium_index).sum())
+        w = np.clip(dn[near] * np.sign(truth), 0, None)
+        masses.append(float(dn[near].sum() / truth))
+        depths.append(float((w * zz[near]).sum() / w.sum()) - cz if w.sum() > 0 else float("nan"))
+        anywhere |= near
+        total += truth
+    return {"masses": masses, "centroids_z_um": depths, "false": float(np.abs(dn[~anywhere]).sum() / abs(total))}

@@ -10,14 +10,21 @@ lenslet's sub-aperture, flat-fielded) are fitted to the measured views,
 
     minimise  ½ Σ_k ‖W (I_k(Δn) / I0_k − m_k)‖² + μ TV_ε(Δn)   subject to  Δn ∈ C
 
-with C the sign, the bound and the field stop of 'tv', by the one nonlinear solver of the package
-(:func:`~napari_ssdpc.reconstruction.nonlinear.projected_gradient`: accelerated projected gradient
-with backtracking and restart, on the setup's backend in float32), the gradient by the model's
-adjoint, as in multislice / beam propagation tomography (Kamilov et al., IEEE TCI 2016; Chowdhury
-et al., Optica 2019). The model
-covers a square region around the objects of the 'tv' solution (their footprint plus a margin for
-the light they scatter) and the planes that hold them (plus a margin): the first-order tails along
-z, which no object explains, are left out; outside the region the 'tv' solution is kept.
+with C the sign, the bound and the field stop of 'tv' and the region's medium edge (below), by the
+one nonlinear solver of the package (:func:`~napari_ssdpc.reconstruction.nonlinear.projected_gradient`:
+accelerated projected gradient with backtracking and restart, on the setup's backend in float32),
+the gradient by the model's adjoint, as in multislice / beam propagation tomography (Kamilov et al.,
+IEEE TCI 2016; Chowdhury et al., Optica 2019).
+
+The model covers a square region around the objects of the 'tv' solution (their footprint plus a
+margin for the light they scatter) and every plane of the volume: nothing is cut out along z, so an
+object that shares an axis with another, or lies deeper than 'tv' puts it, stays in the fit. The
+model's grid is periodic, and a Δn uniform over a plane of it is a phase delay no view sees: a band
+along the region's edge (``medium_edge_um``) is held at the medium, which ties every plane's mean
+to it (without it the sign constraint pumps that free mean into a floor of Δn over the region).
+Outside the region the 'tv' solution is kept. Every object of the region is reported with its
+centre, its dry mass and the residual of the views over it, and a warning names those the model
+does not explain.
 """
 
 from __future__ import annotations
@@ -28,10 +35,10 @@ import time
 import warnings
 
 import numpy as np
-from scipy import ndimage
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.physics.views_multislice import ViewsMultislice, square_roi
+from napari_ssdpc.reconstruction.fit_objects import OBJECT_LEVEL, fit_objects
 from napari_ssdpc.reconstruction.memory import available_memory
 from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
 from napari_ssdpc.reconstruction.methods.tv import TvMethod
@@ -39,11 +46,8 @@ from napari_ssdpc.reconstruction.nonlinear import Fit, Unknowns, projected_gradi
 from napari_ssdpc.reconstruction.proximal import bounds
 from napari_ssdpc.reconstruction.regularised import TvState
 
-__all__ = ["MultisliceMethod", "object_windows", "objects_roi"]
+__all__ = ["MultisliceMethod", "medium_edge", "objects_roi"]
 
-#: A voxel belongs to an object of the 'tv' solution when its |Δn| projected over z reaches this
-#: fraction of the strongest.
-OBJECT_LEVEL = 0.15
 #: Stop when the relative change of Δn falls below this.
 TOLERANCE = 1e-3
 
@@ -74,70 +78,36 @@ def objects_roi(dn, x_um, y_um, margin_um: float, level: float = OBJECT_LEVEL):
     return square_roi(x_um, y_um, ((x0 + x1) / 2, (y0 + y1) / 2), side)
 
 
-def object_windows(dn, z_um, pixel_um: float, margin_um: float, level: float = OBJECT_LEVEL):
-    """Where each object of a Δn volume (a region of it) lies: its own extent around its depth.
+def medium_edge(side: int, pixel_um: float, edge_um: float):
+    """1 inside a square region, 0 on its edge band: there Δn is held at the medium.
 
-    The first-order solution of an object is longer along z than the object (the missing cone)
-    and a strong object trails a tail through the whole z range; neither is the object. The
-    objects are the connected parts of the z-projected |Δn| above ``level`` of its largest; an
-    object's depth z_c is the |Δn|-weighted mean depth of the voxels of its column that reach at
-    least half of its largest |Δn| (its peak, not the tail), and its extent is its equivalent
-    radius r (from its footprint's area) on either side: every pixel of the region (given to the
-    nearest object) keeps the planes |z − z_c| ≤ r + ``margin_um``.
+    The model's grid is periodic, so a Δn that is uniform over a plane of the region is a pure phase
+    delay that no view sees, and under a sign constraint the fit pumps it up into a floor; holding
+    the region's edge at the medium (Δn 0, as the real sample is around its objects) removes that
+    free mean of every plane.
 
     Parameters
     ----------
-    dn : ndarray, (Z, ny, nx)
-        Δn.
-    z_um : ndarray, (Z,)
-        Plane depths, µm.
+    side : int
+        The region's side, unknowns.
     pixel_um : float
-        Lateral pixel, µm.
-    margin_um : float
-        Planes kept beyond the object's extent, µm.
-    level : float
-        Fraction of the largest projected |Δn| that marks an object.
+        The unknowns' lateral pixel, µm.
+    edge_um : float
+        Width of the band held at the medium, µm.
 
     Returns
     -------
-    keep : ndarray, bool, (Z, ny, nx)
-        The voxels inside an object's window.
+    ndarray, float32, (1, side, side)
     """
-    a = np.abs(dn)
-    labels, nearest = object_labels(dn, level)
-    count = int(labels.max())
-    keep = np.zeros(dn.shape, bool)
-    for c in range(1, count + 1):
-        column = labels == c
-        vox = a[:, column]  # (Z, pixels of the object's footprint)
-        core = vox >= 0.5 * vox.max()  # the object's peak, not the broad first-order tail
-        z_c = float(np.sum(np.asarray(z_um)[:, None] * vox * core) / np.sum(vox * core))
-        r = math.sqrt(column.sum() / math.pi) * pixel_um
-        planes = np.abs(np.asarray(z_um) - z_c) <= r + margin_um
-        keep[planes] |= (nearest == c)[None]
-    return keep
-
-
-def object_labels(dn, level: float = OBJECT_LEVEL):
-    """The objects of a Δn volume: connected parts of its z-projected |Δn| above ``level`` of the largest.
-
-    Parameters
-    ----------
-    dn : ndarray, (Z, ny, nx)
-    level : float
-
-    Returns
-    -------
-    labels : ndarray, int, (ny, nx)
-        1..count on each object's footprint, 0 elsewhere.
-    nearest : ndarray, int, (ny, nx)
-        Every pixel labelled with its nearest object.
-    """
-    proj = np.abs(dn).sum(axis=0)
-    on = proj >= level * proj.max() if proj.max() > 0 else np.ones(proj.shape, bool)
-    labels, _ = ndimage.label(on)
-    _, (iy, ix) = ndimage.distance_transform_edt(labels == 0, return_indices=True)
-    return labels, labels[iy, ix]
+    e = int(math.ceil(edge_um / pixel_um - 1e-9))
+    if 2 * e >= side - 1:
+        raise SsdpcError(
+            f"the multislice region ({side * pixel_um:.1f} µm) leaves nothing free inside its medium edge of "
+            f"{edge_um:g} µm on each side: give a larger region (--roi) or a smaller multislice medium_edge_um"
+        )
+    out = np.zeros((1, side, side), np.float32)
+    out[:, e : side - e, e : side - e] = 1.0
+    return out
 
 
 def _roi_of(box_um, x_um, y_um):
@@ -207,12 +177,9 @@ class MultisliceMethod(PhaseMethod):
         else:
             rows, cols = objects_roi(dn, v.x_um, v.y_um, ms.roi_margin_um)
         px = float(v.x_um[1] - v.x_um[0])
-        window = object_windows(dn[:, rows, cols], s.z_um, px, ms.z_margin_um)
-        on = np.flatnonzero(window.any(axis=(1, 2)))
-        planes = slice(int(on[0]), int(on[-1]) + 1)
-        everything = self._model(slice(0, len(s.z_um)), rows, cols)
-        measured = bk.asarray(everything.crop(views), np.float32)
-        weight = bk.asarray(everything.crop(np.asarray(v.view_mask, np.float32)))
+        model = self._model(rows, cols)  # every plane: no object is cut out along z
+        measured = bk.asarray(model.crop(views), np.float32)
+        weight = bk.asarray(model.crop(np.asarray(v.view_mask, np.float32)))
         noise = float(start.report.get("tv_noise", float("nan")))
         noise = noise if math.isfinite(noise) else 0.0
         n_data = max(float(bk.xp.sum(weight)), 1.0)
@@ -222,7 +189,10 @@ class MultisliceMethod(PhaseMethod):
         stop = ms.stop_residual_over_noise + (ms.model_error**2 * contrast / noise**2 if noise > 0 else 0.0)
         enough = 0.5 * n_data * noise**2 * stop
         lo, hi = bounds(_sign_of(start), s.settings.tv.dn_max)  # in Δn
-        inside = np.asarray(v.mask[rows, cols], np.float32)[None]
+        # inside the field stop, and off the region's edge, which is held at the medium
+        inside = np.asarray(v.mask[rows, cols], np.float32)[None] * medium_edge(
+            rows.stop - rows.start, px, ms.medium_edge_um
+        )
 
         def fit_on(model, fine: bool) -> Fit:
             k = ms.refine
@@ -235,6 +205,19 @@ class MultisliceMethod(PhaseMethod):
         def report(fit: Fit, model: ViewsMultislice, x, history, converged):
             res = fit.residual(x)
             sq = float(bk.xp.sum(res * res))
+            per_pixel = bk.to_host(bk.xp.sum(res * res, axis=0) / bk.xp.maximum(bk.xp.sum(weight, axis=0), 1.0))
+            k = model.shape[-1] // fit.inside.shape[-1]  # model samples per unknown: 1 on the model's grid
+            on_views = x if k > 1 else Unknowns(ms.refine, bk.xp).down(x) / ms.refine**2
+            objects = fit_objects(
+                bk.to_host(on_views),
+                per_pixel,
+                s.z_um,
+                v.y_um[rows],
+                v.x_um[cols],
+                noise=noise,
+                alpha_um3_pg=s.settings.refraction_increment_um3_pg,
+                stop=stop,
+            )
             return {
                 **start.report,
                 "multislice_iterations_run": len(history["relative_change"]),
@@ -250,21 +233,20 @@ class MultisliceMethod(PhaseMethod):
                 "multislice_source_points": [model.n_sources, model.n_subsources],
                 "multislice_seconds": time.perf_counter() - t0,
                 "multislice_device": bk.name,
+                "multislice_objects": objects,
             }
 
         # a start the model explains as it is (a weak object) is kept whole, tails of the missing cone
         # included: cutting them would only lose the mass they carry
-        whole_fit = fit_on(everything, fine=False)
-        whole = whole_fit.project(bk.asarray(dn[:, rows, cols]))
-        r = whole_fit.residual(whole)
+        coarse = fit_on(model, fine=False)
+        x0 = coarse.project(bk.asarray(dn[:, rows, cols]))
+        r = coarse.residual(x0)
         f0 = 0.5 * float(bk.xp.sum(r * r))
         if f0 <= enough:
-            kept = report(whole_fit, everything, whole, {"objective": [f0], "relative_change": []}, True)
+            kept = report(coarse, model, x0, {"objective": [f0], "relative_change": []}, True)
             return Solution(start.phase, kept, {**start.history, "multislice": {"objective": [f0]}}, state=start.state)
         fine = ms.unknowns == "model"  # sub-pixel edges: each view pixel's k x k model samples are free
-        model = self._model(planes, rows, cols)
         fit = fit_on(model, fine)
-        x0 = bk.asarray(np.where(window[planes], dn[planes, rows, cols], 0.0).astype(np.float32))  # no tails
         result = projected_gradient(
             fit,
             Unknowns(ms.refine, bk.xp).up(x0) if fine else x0,
@@ -276,8 +258,7 @@ class MultisliceMethod(PhaseMethod):
             label="multislice",
         )
         x = Unknowns(ms.refine, bk.xp).down(result.x) / ms.refine**2 if fine else result.x  # the views' grid
-        dn[:, rows, cols] = 0.0  # the model holds the objects: the first-order tails are gone
-        dn[planes, rows, cols] = bk.to_host(x)
+        dn[:, rows, cols] = bk.to_host(x)
         out = report(fit, model, result.x, result.history, result.converged)
         stopped = should_stop is not None and should_stop()
         if not result.converged and not stopped:
@@ -289,25 +270,38 @@ class MultisliceMethod(PhaseMethod):
                 SsdpcWarning,
                 stacklevel=2,
             )
+        unexplained = [o for o in out["multislice_objects"] if not o["explained"]]
+        if unexplained and not stopped:
+            where = "; ".join(
+                f"({', '.join(f'{c:.1f}' for c in o['centre_um'])}) µm: {o['residual_over_noise']:.1f} x"
+                for o in unexplained
+            )
+            warnings.warn(
+                f"the multislice model does not explain the views over {len(unexplained)} object(s), their Δn is "
+                f"not to be trusted [{where} the noise; the fit stops at {stop:.1f}]: check the optics and the "
+                "calibration, or raise the multislice iterations",
+                SsdpcWarning,
+                stacklevel=2,
+            )
         history = {**start.history, "multislice": result.history}
         return Solution((dn / to_dn).astype(np.float32), out, history, state=start.state)
 
-    def _model(self, planes: slice, rows: slice, cols: slice) -> ViewsMultislice:
-        """The multislice model of the views on ``planes`` of the output grid and the region (rows, cols):
+    def _model(self, rows: slice, cols: slice) -> ViewsMultislice:
+        """The multislice model of the views on every plane of the output grid and the region (rows, cols):
         built once for a region and kept while the frames of a series need the same (the last two)."""
         s = self.setup
-        where = (planes.start, planes.stop, rows.start, rows.stop, cols.start, cols.stop)
+        where = (rows.start, rows.stop, cols.start, cols.stop)
         key = json.dumps([where, s.settings.multislice.to_dict()], sort_keys=True, default=str)
         if key not in self._models:
             while len(self._models) >= 2:
                 self._models.pop(next(iter(self._models)))
-            self._models[key] = self._build_model(planes, rows, cols)
+            self._models[key] = self._build_model(rows, cols)
         return self._models[key]
 
-    def _build_model(self, planes: slice, rows: slice, cols: slice) -> ViewsMultislice:
+    def _build_model(self, rows: slice, cols: slice) -> ViewsMultislice:
         s = self.setup
         return s.views.multislice_model(
-            s.z_um[planes],
+            s.z_um,
             s.dz_um,
             (rows, cols),
             s.settings.multislice,
