@@ -159,7 +159,10 @@ def build_parser():
         "--refine",
         action=argparse.BooleanOptionalAction,
         default=True,
-        help="also refine with --method multislice, about 3 minutes: ri_multislice.ome.tif, refined.png (default: yes)",
+        help=(
+            "also refine with --method multislice (about 12 min on 2 cores): ri_multislice.ome.tif, refined.png "
+            "(default: yes)"
+        ),
     )
     s.add_argument(
         "--overwrite", action="store_true", help="replace files in the folder that napari-ssdpc did not write"
