@@ -9,7 +9,8 @@ import pytest
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics import transfer
 from napari_ssdpc.physics.geometry import nominal_lenslets
-from napari_ssdpc.physics.views_multislice import ViewsMultislice, square_roi
+from napari_ssdpc.physics.multislice_source import square_roi
+from napari_ssdpc.physics.views_multislice import ViewsMultislice
 from napari_ssdpc.reconstruction.forward import ViewModel
 from napari_ssdpc.settings.lenslets import circle_overlap_fraction
 from napari_ssdpc.settings.optics import Optics

@@ -54,54 +54,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.fft as sfft
 
 from napari_ssdpc.backend import Backend, get_backend
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.physics.apertures import disk_fraction, kohler_source, lenslet_source_weights
+from napari_ssdpc.physics.multislice_source import even_fast, lenslet_crops, source_quadrature
 from napari_ssdpc.physics.pupil import Pupil, eta
 from napari_ssdpc.physics.waves import defocus_factor
 from napari_ssdpc.settings.optics import Optics
 
-__all__ = ["ViewsMultislice", "square_roi"]
-
-
-def _even_fast(m: int) -> int:
-    """The smallest even FFT-friendly size >= ``m``."""
-    m = sfft.next_fast_len(max(int(m), 2))
-    while m % 2:
-        m = sfft.next_fast_len(m + 1)
-    return m
-
-
-def square_roi(x_um, y_um, centre_um=(0.0, 0.0), side_um: float = 40.0) -> tuple[slice, slice]:
-    """A square region of the views' grid around ``centre_um``, of an even FFT-friendly side.
-
-    Parameters
-    ----------
-    x_um, y_um : array_like, (w,), (h,)
-        The views' grid (pixel centres), µm from the optical axis.
-    centre_um : (float, float)
-        (x, y) of the region's centre, µm.
-    side_um : float
-        Smallest side, µm: the sample plus the margin its scattered light needs.
-
-    Returns
-    -------
-    rows, cols : slice
-        The region on the views' grid (equal lengths), shifted to lie inside it.
-    """
-    x, y = np.asarray(x_um, float), np.asarray(y_um, float)
-    px = float(x[1] - x[0])
-    side = _even_fast(int(math.ceil(side_um / px)))
-    if side > min(len(x), len(y)):
-        side = min(len(x), len(y)) // 2 * 2
-    out = []
-    for c, grid in ((centre_um[1], y), (centre_um[0], x)):
-        i0 = int(np.argmin(np.abs(grid - c))) - side // 2
-        i0 = min(max(i0, 0), len(grid) - side)
-        out.append(slice(i0, i0 + side))
-    return out[0], out[1]
+__all__ = ["ViewsMultislice"]
 
 
 class ViewsMultislice:
@@ -119,7 +80,8 @@ class ViewsMultislice:
         Voxel centres of the volume, µm, increasing and evenly spaced (z > 0: farther from the
         objective).
     roi : (slice, slice), optional
-        Rows and columns of the views' grid the model covers (equal lengths; :func:`square_roi`);
+        Rows and columns of the views' grid the model covers (equal lengths;
+        :func:`~napari_ssdpc.physics.multislice_source.square_roi`);
         default the whole grid (which must be square).
     refine : int
         Model samples per view pixel along x and y (the model grid is ``refine`` times finer).
@@ -227,23 +189,12 @@ class ViewsMultislice:
         # multislice runs once per point; its exit field stands for q x q sub-points of its cell,
         # which the exit propagation, the pupil and the sub-apertures see at their own tilt
         h, q = source_spacing_na / lam, int(source_subsamples)
-        if q < 1:
-            raise SsdpcError("source_subsamples must be a positive integer")
-        _, w, _ = kohler_source(optics.source_radius, h, 1)
-        t = ((np.arange(q) + 0.5) / q - 0.5) * h
-        w_sub = w[:, None] + np.stack(np.meshgrid(t, t), axis=-1).reshape(1, q * q, 2)  # (S, Q, 2)
         u_k = np.array([ln.u for ln in lenslets] if not isinstance(lenslets, np.ndarray) else lenslets, float)
         self.pupil = Pupil.of(optics)
         self.rho = self.pupil.rho
-        flat_sub = w_sub.reshape(-1, 2)
-        if edge_weights:  # (S·Q, K): each lenslet's bright-field edge sampled finely
-            wgt = lenslet_source_weights(flat_sub, h / q, optics.source_radius, u_k, self.pupil)
-        else:
-            cell = disk_fraction(flat_sub[:, 0], flat_sub[:, 1], optics.source_radius, h / q) * (h / q) ** 2
-            wgt = np.repeat(cell[:, None], len(u_k), axis=1)
-        wgt = wgt.reshape(len(w), q * q, len(u_k))
+        w, w_sub, wgt = source_quadrature(optics, self.pupil, u_k, h, q, edge_weights)
         self.n_sources, self.n_subsources = len(w), q * q
-        self.m = m = min(_even_fast(int(math.ceil((4 * self.rho + h) / du)) + 4), nv)
+        self.m = m = min(even_fast(int(math.ceil((4 * self.rho + h) / du)) + 4), nv)
         self.chunk = max(1, int(chunk))
         self.memory_mb = float(memory_mb)
         self.bytes_needed = self._bytes_needed(len(u_k))
@@ -259,14 +210,7 @@ class ViewsMultislice:
         e, e0 = eta(u2, nm, lam), eta(np.sum(w * w, axis=1), nm, lam).real[:, None, None]
         h_slab = defocus_factor(e, self.delta) * np.exp(-2j * np.pi * self.delta * e0)
         # --- lenslet crops: an m x m crop of the exit spectrum around u_k − w_j, for every pair ----
-        off = np.arange(m) - m // 2
-        c = np.rint((u_k[None] - w[:, None]) / du).astype(int)  # (S, K, 2): crop centres, lattice units
-        ex, ey = c[..., 0, None] + off, c[..., 1, None] + off  # (S, K, m): envelope-grid indices
-        # absolute frequency of every crop index for every sub-point, (S, Q, K, m)
-        ux = w_sub[:, :, None, 0, None] + ex[:, None] * du
-        uy = w_sub[:, :, None, 1, None] + ey[:, None] * du
-        inx = ((ex >= -(n // 2)) & (ex < n - n // 2))[:, None]  # inside the grid's band
-        iny = ((ey >= -(n // 2)) & (ey < n - n // 2))[:, None]
+        ex, ey, ux, uy, inx, iny = lenslet_crops(w, w_sub, u_k, du, m, n)
         self.z_exit, self._k2 = z_exit, (nm / lam) ** 2
         eta0 = np.sqrt(self._k2 - np.sum(w_sub**2, axis=-1))  # η(w') of every sub-point, (S, Q)
         # --- intensity: m-crop grid -> the views' pixels (Fourier interpolation, pixel sinc) -----

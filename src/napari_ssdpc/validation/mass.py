@@ -32,6 +32,17 @@ def mass_and_tail(result, phantom, medium_index: float, margin_um: float = 4.0, 
         Σ|Δn| in the disk farther than ``tail_um`` from the object along z over Σ|Δn| within it.
     """
     dn = np.asarray(result.delta_n, float)
+    disk, near = _neighbourhood(result, phantom, margin_um, tail_um)
+    truth = float(truth_volume(phantom, result, medium_index).sum())
+    inside = float(np.abs(dn[near][:, disk]).sum())
+    return {
+        "integrated": float(dn[:, disk].sum() / truth),
+        "tail": float(np.abs(dn[~near][:, disk]).sum() / inside) if inside > 0 else float("inf"),
+    }
+
+
+def _neighbourhood(result, phantom, margin_um: float, tail_um: float):
+    """The object's disk (y, x), ``margin_um`` wider than it, and its planes (z,), ``tail_um`` beyond it."""
     yy, xx = np.meshgrid(result.y_um, result.x_um, indexing="ij")
     cx, cy, cz = phantom.center_um
     if hasattr(phantom, "diameter_um"):
@@ -39,13 +50,7 @@ def mass_and_tail(result, phantom, medium_index: float, margin_um: float = 4.0, 
     else:
         r_xy, r_z = max(phantom.semi_axes_um), phantom.semi_axes_um[2]
     disk = np.hypot(xx - cx, yy - cy) <= r_xy + margin_um
-    near = np.abs(np.asarray(result.z_um) - cz) <= r_z + tail_um
-    truth = float(truth_volume(phantom, result, medium_index).sum())
-    inside = float(np.abs(dn[near][:, disk]).sum())
-    return {
-        "integrated": float(dn[:, disk].sum() / truth),
-        "tail": float(np.abs(dn[~near][:, disk]).sum() / inside) if inside > 0 else float("inf"),
-    }
+    return disk, np.abs(np.asarray(result.z_um) - cz) <= r_z + tail_um
 
 
 def masses_and_false(result, spheres, medium_index: float, margin_um: float = 4.0, tail_um: float = 8.0) -> dict:
@@ -72,17 +77,16 @@ def masses_and_false(result, spheres, medium_index: float, margin_um: float = 4.
         "false Δn"; 0 is exact).
     """
     dn = np.asarray(result.delta_n, float)
-    zz, yy, xx = np.meshgrid(result.z_um, result.y_um, result.x_um, indexing="ij")
+    zz = np.broadcast_to(np.asarray(result.z_um, float)[:, None, None], dn.shape)
     anywhere = np.zeros(dn.shape, bool)
     total, masses, depths = 0.0, [], []
     for s in spheres:
-        cx, cy, cz = s.center_um
-        r = s.diameter_um / 2
-        near = (np.hypot(xx - cx, yy - cy) <= r + margin_um) & (np.abs(zz - cz) <= r + tail_um)
+        disk, planes = _neighbourhood(result, s, margin_um, tail_um)
+        near = planes[:, None, None] & disk[None]
         truth = float(truth_volume(s, result, medium_index).sum())
         w = np.clip(dn[near] * np.sign(truth), 0, None)
         masses.append(float(dn[near].sum() / truth))
-        depths.append(float((w * zz[near]).sum() / w.sum()) - cz if w.sum() > 0 else float("nan"))
+        depths.append(float((w * zz[near]).sum() / w.sum()) - s.center_um[2] if w.sum() > 0 else float("nan"))
         anywhere |= near
         total += truth
     return {"masses": masses, "centroids_z_um": depths, "false": float(np.abs(dn[~anywhere]).sum() / abs(total))}

@@ -37,7 +37,8 @@ import warnings
 import numpy as np
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
-from napari_ssdpc.physics.views_multislice import ViewsMultislice, square_roi
+from napari_ssdpc.physics.multislice_source import square_roi
+from napari_ssdpc.physics.views_multislice import ViewsMultislice
 from napari_ssdpc.reconstruction.fit_objects import OBJECT_LEVEL, fit_objects
 from napari_ssdpc.reconstruction.memory import available_memory
 from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
@@ -202,14 +203,13 @@ class MultisliceMethod(PhaseMethod):
             mu = ms.tv_weight * noise
             return Fit(model, measured, weight, unknowns, lo, hi, bk.asarray(ins), mu, voxel)
 
-        def report(fit: Fit, model: ViewsMultislice, x, history, converged):
+        def report(fit: Fit, model: ViewsMultislice, x, on_views, history, converged):
+            """The report of the fit ending at x (on its unknowns' grid; ``on_views``: on the views')."""
             res = fit.residual(x)
             sq = float(bk.xp.sum(res * res))
             per_pixel = bk.to_host(bk.xp.sum(res * res, axis=0) / bk.xp.maximum(bk.xp.sum(weight, axis=0), 1.0))
-            k = model.shape[-1] // fit.inside.shape[-1]  # model samples per unknown: 1 on the model's grid
-            on_views = x if k > 1 else Unknowns(ms.refine, bk.xp).down(x) / ms.refine**2
             objects = fit_objects(
-                bk.to_host(on_views),
+                on_views,
                 per_pixel,
                 s.z_um,
                 v.y_um[rows],
@@ -243,7 +243,7 @@ class MultisliceMethod(PhaseMethod):
         r = coarse.residual(x0)
         f0 = 0.5 * float(bk.xp.sum(r * r))
         if f0 <= enough:
-            kept = report(coarse, model, x0, {"objective": [f0], "relative_change": []}, True)
+            kept = report(coarse, model, x0, bk.to_host(x0), {"objective": [f0], "relative_change": []}, True)
             return Solution(start.phase, kept, {**start.history, "multislice": {"objective": [f0]}}, state=start.state)
         fine = ms.unknowns == "model"  # sub-pixel edges: each view pixel's k x k model samples are free
         fit = fit_on(model, fine)
@@ -259,7 +259,7 @@ class MultisliceMethod(PhaseMethod):
         )
         x = Unknowns(ms.refine, bk.xp).down(result.x) / ms.refine**2 if fine else result.x  # the views' grid
         dn[:, rows, cols] = bk.to_host(x)
-        out = report(fit, model, result.x, result.history, result.converged)
+        out = report(fit, model, result.x, dn[:, rows, cols], result.history, result.converged)
         stopped = should_stop is not None and should_stop()
         if not result.converged and not stopped:
             warnings.warn(

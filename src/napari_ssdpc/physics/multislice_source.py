@@ -1,0 +1,149 @@
+"""The multislice model's region and its source: a square region of the views' grid, the Köhler
+source points with their sub-points and per-lenslet weights, and each (point, lenslet) pair's crop
+of the exit spectrum (:class:`~napari_ssdpc.physics.views_multislice.ViewsMultislice`).
+
+Frequencies are in cycles/µm, lengths in µm.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.fft as sfft
+
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.physics.apertures import disk_fraction, kohler_source, lenslet_source_weights
+from napari_ssdpc.physics.pupil import Pupil
+from napari_ssdpc.settings.optics import Optics
+
+__all__ = ["even_fast", "lenslet_crops", "source_quadrature", "square_roi"]
+
+
+def even_fast(m: int) -> int:
+    """The smallest even FFT-friendly size >= ``m``.
+
+    Parameters
+    ----------
+    m : int
+
+    Returns
+    -------
+    int
+    """
+    m = sfft.next_fast_len(max(int(m), 2))
+    while m % 2:
+        m = sfft.next_fast_len(m + 1)
+    return m
+
+
+def square_roi(x_um, y_um, centre_um=(0.0, 0.0), side_um: float = 40.0) -> tuple[slice, slice]:
+    """A square region of the views' grid around ``centre_um``, of an even FFT-friendly side.
+
+    Parameters
+    ----------
+    x_um, y_um : array_like, (w,), (h,)
+        The views' grid (pixel centres), µm from the optical axis.
+    centre_um : (float, float)
+        (x, y) of the region's centre, µm.
+    side_um : float
+        Smallest side, µm: the sample plus the margin its scattered light needs.
+
+    Returns
+    -------
+    rows, cols : slice
+        The region on the views' grid (equal lengths), shifted to lie inside it.
+    """
+    x, y = np.asarray(x_um, float), np.asarray(y_um, float)
+    px = float(x[1] - x[0])
+    side = even_fast(int(math.ceil(side_um / px)))
+    if side > min(len(x), len(y)):
+        side = min(len(x), len(y)) // 2 * 2
+    out = []
+    for c, grid in ((centre_um[1], y), (centre_um[0], x)):
+        i0 = int(np.argmin(np.abs(grid - c))) - side // 2
+        i0 = min(max(i0, 0), len(grid) - side)
+        out.append(slice(i0, i0 + side))
+    return out[0], out[1]
+
+
+def source_quadrature(optics: Optics, pupil: Pupil, u_k, h: float, q: int, edge_weights: bool = True):
+    """Source points over the condenser disk (paper Eq. 2) on a square lattice of step h, each
+    standing for q x q sub-points of its cell, with every sub-point's weight for every lenslet.
+
+    The multislice runs once per point; its exit field stands for the sub-points of its cell, which
+    the exit propagation, the pupil and the sub-apertures see at their own tilt.
+
+    Parameters
+    ----------
+    optics : Optics
+    pupil : Pupil
+    u_k : ndarray, (K, 2)
+        Sub-aperture centres, cycles/µm.
+    h : float
+        Lattice step of the points, cycles/µm.
+    q : int
+        Sub-points per point and axis.
+    edge_weights : bool
+        Weight the sub-points per lenslet so that each view's bright-field area is exact
+        (:func:`~napari_ssdpc.physics.apertures.lenslet_source_weights`); otherwise every sub-point
+        carries its own cell of the disk for every lenslet.
+
+    Returns
+    -------
+    w : ndarray, (S, 2)
+        The points, cycles/µm.
+    w_sub : ndarray, (S, Q, 2)
+        Their sub-points (Q = q²).
+    wgt : ndarray, (S, Q, K)
+        The weight of every sub-point for every lenslet.
+    """
+    if q < 1:
+        raise SsdpcError("source_subsamples must be a positive integer")
+    _, w, _ = kohler_source(optics.source_radius, h, 1)
+    t = ((np.arange(q) + 0.5) / q - 0.5) * h
+    w_sub = w[:, None] + np.stack(np.meshgrid(t, t), axis=-1).reshape(1, q * q, 2)
+    flat_sub = w_sub.reshape(-1, 2)
+    if edge_weights:  # (S·Q, K): each lenslet's bright-field edge sampled finely
+        wgt = lenslet_source_weights(flat_sub, h / q, optics.source_radius, u_k, pupil)
+    else:
+        cell = disk_fraction(flat_sub[:, 0], flat_sub[:, 1], optics.source_radius, h / q) * (h / q) ** 2
+        wgt = np.repeat(cell[:, None], len(u_k), axis=1)
+    return w, w_sub, wgt.reshape(len(w), q * q, len(u_k))
+
+
+def lenslet_crops(w, w_sub, u_k, du: float, m: int, n: int):
+    """For every (point, lenslet) pair, an m x m crop of the exit spectrum around u_k − w_j.
+
+    Parameters
+    ----------
+    w : ndarray, (S, 2)
+        Source points, cycles/µm.
+    w_sub : ndarray, (S, Q, 2)
+        Their sub-points.
+    u_k : ndarray, (K, 2)
+        Sub-aperture centres.
+    du : float
+        The grid's frequency step, cycles/µm.
+    m : int
+        Crop side.
+    n : int
+        The grid's side.
+
+    Returns
+    -------
+    ex, ey : ndarray, int, (S, K, m)
+        Envelope-grid indices of the crops (unwrapped).
+    ux, uy : ndarray, (S, Q, K, m)
+        Absolute frequency of every crop index for every sub-point.
+    inx, iny : ndarray, bool, (S, 1, K, m)
+        Inside the grid's band.
+    """
+    off = np.arange(m) - m // 2
+    c = np.rint((u_k[None] - w[:, None]) / du).astype(int)  # (S, K, 2): crop centres, lattice units
+    ex, ey = c[..., 0, None] + off, c[..., 1, None] + off
+    ux = w_sub[:, :, None, 0, None] + ex[:, None] * du
+    uy = w_sub[:, :, None, 1, None] + ey[:, None] * du
+    inx = ((ex >= -(n // 2)) & (ex < n - n // 2))[:, None]
+    iny = ((ey >= -(n // 2)) & (ey < n - n // 2))[:, None]
+    return ex, ey, ux, uy, inx, iny
