@@ -14,6 +14,7 @@ import sys
 import warnings
 
 from napari_ssdpc import __version__
+from napari_ssdpc.cli.beads import add_beads_command
 from napari_ssdpc.cli.commands import (
     PHANTOMS,
     cmd_bench,
@@ -169,6 +170,7 @@ def build_parser():
     )
     s.set_defaults(func=cmd_demo)
     add_measure_command(sub)
+    add_beads_command(sub)
     return p
 
 

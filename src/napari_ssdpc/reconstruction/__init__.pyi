@@ -1,3 +1,4 @@
+from .beads import Bead, fit_beads, measure_beads
 from .methods import METHODS, method_class
 from .methods.base import PhaseMethod, Setup, Solution
 from .reconstructor import Reconstructor, Result
@@ -7,6 +8,7 @@ from .wotf import WotfInversion
 
 __all__ = [
     "METHODS",
+    "Bead",
     "PhaseMethod",
     "Reconstructor",
     "Result",
@@ -15,5 +17,7 @@ __all__ = [
     "TvInversion",
     "TvReport",
     "WotfInversion",
+    "fit_beads",
+    "measure_beads",
     "method_class",
 ]

@@ -8,7 +8,7 @@ import math
 import numpy as np
 from scipy import ndimage
 
-__all__ = ["MIN_VOXELS", "OBJECT_LEVEL", "fit_objects"]
+__all__ = ["MIN_VOXELS", "OBJECT_LEVEL", "fit_objects", "object_labels"]
 
 #: A voxel belongs to an object when its |Δn| reaches this fraction of the strongest (a pixel of the
 #: region's objects, when its z-projected |Δn| does).
@@ -17,12 +17,33 @@ OBJECT_LEVEL = 0.15
 MIN_VOXELS = 8
 
 
+def object_labels(dn) -> np.ndarray:
+    """The objects of a Δn volume: connected voxels (in 3D) whose |Δn| reaches ``OBJECT_LEVEL`` of the
+    largest, at least :data:`MIN_VOXELS` of them.
+
+    Parameters
+    ----------
+    dn : ndarray, (Z, ny, nx)
+
+    Returns
+    -------
+    ndarray of int, (Z, ny, nx)
+        1, 2, ... per object, 0 elsewhere.
+    """
+    a = np.abs(np.asarray(dn, float))
+    if a.max() <= 0:
+        return np.zeros(a.shape, int)
+    labels, count = ndimage.label(a >= OBJECT_LEVEL * a.max(), structure=np.ones((3, 3, 3)))
+    sizes = np.bincount(labels.ravel(), minlength=count + 1)
+    labels[sizes[labels] < MIN_VOXELS] = 0
+    return labels
+
+
 def fit_objects(dn, misfit_map, z_um, y_um, x_um, *, noise: float, alpha_um3_pg: float, stop: float) -> list[dict]:
     """Every object of a fitted region with its centre, dry mass and residual over the noise.
 
-    The objects are the connected parts (in 3D: two objects on one axis are two) of the voxels whose
-    |Δn| reaches ``OBJECT_LEVEL`` of the largest, with at least :data:`MIN_VOXELS` voxels; every voxel
-    of the region is given to the nearest object, so the masses add up to the region's.
+    The objects are those of :func:`object_labels` (in 3D: two objects on one axis are two); every
+    voxel of the region is given to the nearest object, so the masses add up to the region's.
 
     Parameters
     ----------
@@ -51,11 +72,7 @@ def fit_objects(dn, misfit_map, z_um, y_um, x_um, *, noise: float, alpha_um3_pg:
     z, y, x = (np.asarray(c, float) for c in (z_um, y_um, x_um))
     voxel = (abs(z[1] - z[0]) if len(z) > 1 else 1.0, abs(y[1] - y[0]), abs(x[1] - x[0]))
     a = np.abs(dn)
-    if a.max() <= 0:
-        return []
-    labels, count = ndimage.label(a >= OBJECT_LEVEL * a.max(), structure=np.ones((3, 3, 3)))
-    sizes = np.bincount(labels.ravel(), minlength=count + 1)
-    labels[sizes[labels] < MIN_VOXELS] = 0
+    labels = object_labels(dn)
     if not labels.any():
         return []
     _, idx = ndimage.distance_transform_edt(labels == 0, sampling=voxel, return_indices=True)

@@ -1,0 +1,356 @@
+"""Beads measured as beads: every bead of a frame fitted as a sphere (centre, diameter, RI) with the
+multislice model of the views.
+
+Microscopists check an instrument with beads of known size and index. A voxel reconstruction of a
+strong bead is biased (the first-order 'tv' loses mass and moves it toward the bead's focus); a
+sphere has five numbers, and the multislice model of the views
+(:class:`~napari_ssdpc.physics.views_multislice.ViewsMultislice`) predicts its views without the
+first-order approximation. Here each bead is the sphere (x, y, z, R, Δn) that minimises
+
+    ½ Σ_k ‖W (I_k(spheres) / I0_k − m_k)‖²
+
+(the views' misfit of the multislice fit, with Δn of the voxels from
+:mod:`~napari_ssdpc.reconstruction.sphere_volume`), by L-BFGS-B on the gradient the model's adjoint
+gives. The misfit of a strong bead has many local minima (each 2π of phase through the bead is one),
+so the fit starts from the best of a scan:
+
+1. the candidates are the objects of a first answer (the 'tv' volume): their centre and the radius of
+   their footprint;
+2. on a coarse model (a source point every 0.08 NA instead of 0.03, 1 µm planes), a scan of radius
+   x Δn at the candidate's depth, of depth over ± ``z_search_um`` for the best three, and of radius x
+   Δn again at the best depth; the three best distinct starts are fitted on the coarse model;
+3. the best is fitted on the full model (the multislice settings' sampling, 0.5 µm planes).
+
+Beads whose footprints come near one another are fitted together in one region (their spheres add).
+A bead is reported with the residual of the views over its footprint over the noise, and flagged when
+the fit did not converge or the model does not explain the views there.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from napari_ssdpc.errors import Cancelled, SsdpcError
+from napari_ssdpc.physics.multislice_source import square_roi
+from napari_ssdpc.reconstruction.bead_search import (
+    COARSE,
+    COARSE_DZ_UM,
+    FINE_DZ_UM,
+    RADIUS_STEPS,
+    STARTS,
+    BeadRegion,
+    Stopped,
+    distinct_starts,
+    local_fit,
+    overlap_groups,
+    scan_starts,
+)
+from napari_ssdpc.reconstruction.dpc import phase_to_delta_n
+from napari_ssdpc.reconstruction.fit_objects import object_labels
+
+__all__ = ["Bead", "bead_candidates", "fit_beads", "measure_beads"]
+
+
+@dataclass(frozen=True)
+class Bead:
+    """One fitted bead.
+
+    Attributes
+    ----------
+    centre_um : tuple of float
+        (x, y, z), µm (z > 0: farther from the objective).
+    diameter_um : float
+    ri : float
+        Its refractive index (the medium's plus Δn).
+    delta_n : float
+        Its index minus the medium's.
+    residual_over_noise : float or None
+        Mean squared residual of the views over its footprint, in noise variances.
+    stop_over_noise : float
+        The residual the model reaches on a well-explained bead (the noise and the model's error).
+    converged : bool
+        The fit ended on its convergence test.
+    explained : bool
+        The residual is within twice the stop.
+    note : str
+        What a user must know before trusting it ('' when nothing): not converged, not explained,
+        overlapping another bead.
+    """
+
+    centre_um: tuple[float, float, float]
+    diameter_um: float
+    ri: float
+    delta_n: float
+    residual_over_noise: float | None
+    stop_over_noise: float
+    converged: bool
+    explained: bool
+    note: str = ""
+
+    def to_dict(self) -> dict:
+        """Plain numbers for JSON."""
+        return asdict(self)
+
+
+def bead_candidates(dn, z_um, y_um, x_um) -> np.ndarray:
+    """The objects of a Δn volume as sphere starts (x, y, z, R, Δn).
+
+    Parameters
+    ----------
+    dn : ndarray, (Z, ny, nx)
+        A first answer (e.g. the 'tv' volume), dimensionless.
+    z_um, y_um, x_um : ndarray
+        Its grid, µm.
+
+    Returns
+    -------
+    ndarray, (B, 5)
+        The |Δn|-weighted centre, the radius of the object's footprint (the disk of its area)
+        and the mean Δn of a sphere of that radius holding the object's integrated Δn; largest first.
+    """
+    dn = np.asarray(dn, float)
+    labels = object_labels(dn)
+    z, y, x = (np.asarray(a, float) for a in (z_um, y_um, x_um))
+    voxel = (abs(z[1] - z[0]) if len(z) > 1 else 1.0) * abs(y[1] - y[0]) * abs(x[1] - x[0])
+    rows = []
+    for c, sl in enumerate(ndimage.find_objects(labels), start=1):
+        if sl is None:
+            continue
+        own = labels[sl] == c
+        w = np.abs(dn[sl]) * own
+        zz, yy, xx = np.meshgrid(z[sl[0]], y[sl[1]], x[sl[2]], indexing="ij")
+        centre = [float(np.sum(g * w) / w.sum()) for g in (xx, yy, zz)]
+        radius = math.sqrt(own.any(axis=0).sum() * abs(y[1] - y[0]) * abs(x[1] - x[0]) / math.pi)
+        integral = float(np.sum(dn[sl] * own)) * voxel
+        rows.append([*centre, radius, integral / (4 / 3 * math.pi * radius**3)])
+    rows.sort(key=lambda r: -abs(r[4]) * r[3] ** 3)
+    return np.array(rows, float).reshape(-1, 5)
+
+
+def fit_beads(
+    measurements,
+    views,
+    dn,
+    z_um,
+    *,
+    noise: float,
+    optics,
+    settings,
+    z_search_um: float = 12.0,
+    min_fraction: float = 0.05,
+    iterations: int = 60,
+    backend=None,
+    progress=None,
+    should_stop=None,
+) -> list[Bead]:
+    """Every bead of a frame fitted as a sphere with the multislice model of its views.
+
+    Parameters
+    ----------
+    measurements : Measurements
+        The views' front end (its grid, masks and multislice model).
+    views : ndarray, (K, ny, nx)
+        The flat-fielded views of the frame.
+    dn : ndarray, (Z, ny, nx)
+        A first answer for the frame (the 'tv' volume): where the beads are.
+    z_um : ndarray, (Z,)
+        Its planes, µm.
+    noise : float
+        The views' noise σ, flat-field units (the 'tv' report's ``tv_noise``).
+    optics : Optics
+        The medium's index (RI = medium + Δn) and the objective's NA (a bead's footprint in the views).
+    settings : MultisliceSettings
+        The multislice model's sampling and its stop (the residual a well-explained bead reaches).
+    z_search_um : float
+        How far above and below the first answer's depth a bead is looked for, µm (a strong
+        bead's first-order answer lies toward its focus).
+    min_fraction : float
+        Objects of the first answer with less integrated |Δn| than this fraction of the largest's are
+        not taken for beads.
+    iterations : int
+        Most L-BFGS iterations of each fit.
+    backend : {'cpu', 'gpu'} or Backend, optional
+    progress : callable, optional
+        ``progress(done, total, label)`` after each stage (the scan, the coarse fit of every bead; the
+        full fit of every group).
+    should_stop : callable, optional
+        Checked at every evaluation; True stops with :class:`~napari_ssdpc.errors.Cancelled`.
+
+    Returns
+    -------
+    list of Bead
+        Largest first.
+    """
+    if not (noise > 0 and math.isfinite(noise)):
+        raise SsdpcError(f"the views' noise must be a positive number to judge a bead's fit, got {noise}")
+    cands = bead_candidates(dn, z_um, measurements.y_um, measurements.x_um)
+    if len(cands):
+        size = np.abs(cands[:, 4]) * cands[:, 3] ** 3
+        cands = cands[size >= min_fraction * size.max()]
+    out: list[Bead] = []
+    groups = overlap_groups(cands, settings.roi_margin_um)
+    total, done = sum(2 * len(g) + 1 for g in groups), [0]
+
+    def step(label: str) -> None:
+        """One stage of a group done: the progress bar moves on."""
+        done[0] += 1
+        if progress is not None:
+            progress(done[0], total, label)
+
+    try:
+        for g in groups:
+            out += _fit_group(
+                measurements,
+                views,
+                cands[g],
+                noise,
+                optics,
+                settings,
+                z_search_um,
+                iterations,
+                backend,
+                should_stop,
+                step,
+            )
+    except Stopped:
+        raise Cancelled("the bead fit was stopped") from None
+    return sorted(out, key=lambda b: -(b.diameter_um**3) * abs(b.delta_n))
+
+
+def _fit_group(
+    measurements, views, cands, noise, optics, settings, z_search_um, iterations, backend, should_stop, step
+):
+    """The spheres of one group of candidates, fitted together in one region."""
+    sign = np.where(cands[:, 4] < 0, -1.0, 1.0)
+    reach = RADIUS_STEPS[-1] * cands[:, 3]
+    x0, x1 = np.min(cands[:, 0] - reach), np.max(cands[:, 0] + reach)
+    y0, y1 = np.min(cands[:, 1] - reach), np.max(cands[:, 1] + reach)
+    side = max(x1 - x0, y1 - y0) + 2 * settings.roi_margin_um
+    roi = square_roi(measurements.x_um, measurements.y_um, ((x0 + x1) / 2, (y0 + y1) / 2), side)
+    depth = z_search_um + reach.max() + COARSE_DZ_UM
+    coarse = BeadRegion(
+        measurements,
+        views,
+        roi,
+        cands[:, 2].min() - depth,
+        cands[:, 2].max() + depth,
+        COARSE_DZ_UM,
+        settings.replace(**COARSE),
+        backend,
+    )
+    spheres = cands.copy()
+
+    def fitted(start, dz, model_settings):
+        """A local fit on the planes the spheres fill (again on wider ones where one moves out of them)."""
+        for _ in range(3):
+            lo, hi = np.min(start[:, 2] - start[:, 3]) - 2.0, np.max(start[:, 2] + start[:, 3]) + 2.0
+            region = BeadRegion(measurements, views, roi, lo, hi, dz, model_settings, backend)
+            p, value, converged = local_fit(region, start, sign, iterations, should_stop)
+            if region.covers(p):
+                break
+            start = p
+        return p, value, converged, region
+
+    for b in range(len(spheres)):
+        found = scan_starts(coarse, spheres, b, z_search_um, sign[b])
+        step("beads: scanning depth, size and index")
+        fits = [fitted(p, COARSE_DZ_UM, settings.replace(**COARSE)) for _, p in distinct_starts(found, STARTS)]
+        spheres = min(fits, key=lambda a: a[1])[0]
+        step("beads: coarse fit")
+    spheres, _, converged, fine = fitted(spheres, FINE_DZ_UM, settings)
+    step("beads: full fit")
+    return _report(fine, spheres, converged, noise, optics, settings)
+
+
+def _report(region: BeadRegion, spheres, converged: bool, noise: float, optics, settings) -> list[Bead]:
+    """Each sphere as a Bead, with the residual of the views over its footprint."""
+    per_pixel = region.residual_map(spheres)
+    m = region.model
+    xp = m.xp
+    contrast_map = np.asarray(
+        m.bk.to_host(
+            xp.sum(region.weight * (region.measured - 1.0) ** 2, axis=0)
+            / xp.maximum(xp.sum(region.weight, axis=0), 1.0)
+        ),
+        float,
+    )
+    tilt = optics.na / math.sqrt(optics.medium_index**2 - optics.na**2)
+    beads = []
+    for i, s in enumerate(spheres):
+        x, y, z, r, dn = (float(v) for v in s)
+        reach = r + 1.0 + abs(z) * tilt  # the bead's image in the most oblique view
+        foot = np.hypot(region.x_um[None, :] - x, region.y_um[:, None] - y) <= reach
+        ratio = float(per_pixel[foot].mean()) / noise**2 if foot.any() else None
+        stop = settings.stop_residual_over_noise + settings.model_error**2 * float(contrast_map[foot].mean()) / noise**2
+        explained = ratio is not None and ratio <= 2 * max(stop, 1.0)
+        notes = [] if converged else ["the fit did not converge"]
+        if not explained:
+            notes.append(
+                f"the model leaves {ratio or float('nan'):.1f} x the noise over it (a bead fits to {stop:.1f})"
+            )
+        notes += [
+            f"overlaps the bead at ({o[0]:.1f}, {o[1]:.1f}, {o[2]:.1f}) µm"
+            for j, o in enumerate(spheres)
+            if j != i and math.dist(o[:3], s[:3]) < o[3] + s[3]
+        ]
+        beads.append(
+            Bead((x, y, z), 2 * r, optics.medium_index + dn, dn, ratio, stop, converged, explained, "; ".join(notes))
+        )
+    return beads
+
+
+def measure_beads(
+    rec, frame, *, result=None, name: str = "frame", progress=None, should_stop=None, **options
+) -> list[Bead]:
+    """The beads of a raw frame, each fitted as a sphere (the Python API of ``ssdpc beads``).
+
+    Parameters
+    ----------
+    rec : Reconstructor
+        Built for the frame's calibration and flat with the 'tv' method (or its 'multislice'
+        refinement): its 'tv' answer says where the beads are.
+    frame : array_like, (H, W)
+        The raw frame, camera units.
+    result : Result, optional
+        The 'tv' result of this frame when it is already computed (not solved again).
+    name : str
+        The frame's name in error messages.
+    progress, should_stop
+        As :func:`fit_beads`; ``progress`` also follows the 'tv' solve.
+    **options
+        ``z_search_um``, ``min_fraction``, ``iterations``: see :func:`fit_beads`.
+
+    Returns
+    -------
+    list of Bead
+        Largest first; empty when the frame holds no object.
+    """
+    views, _ = rec.views.measure(frame, name)
+    if result is None:
+        tv = rec.method if rec.method.start is None else rec.method.start
+        if tv.name != "tv":
+            raise SsdpcError(f"the bead fit starts from the 'tv' answer; the reconstructor solves with '{tv.name}'")
+        sol = tv.solve(views, progress=progress, should_stop=should_stop)
+        dn, noise = phase_to_delta_n(sol.phase, rec.optics.wavelength_um, rec.dz), sol.report.get("tv_noise")
+    else:
+        dn, noise = result.delta_n, result.settings.get("tv_noise")
+    if noise is None:
+        raise SsdpcError("the result holds no 'tv' noise estimate: give a result of the 'tv' method, or none")
+    settings = rec.config.reconstruction
+    return fit_beads(
+        rec.views,
+        views,
+        dn,
+        rec.z_um,
+        noise=float(noise),
+        optics=rec.optics,
+        settings=settings.multislice,
+        backend=rec.backend,
+        progress=progress,
+        should_stop=should_stop,
+        **options,
+    )
