@@ -5,9 +5,11 @@ Paper optics at condenser NA 0.25 (16 lit views), the simulated 13 µm PMMA bead
 region of interest; then the 8-frame moving sample streamed from a TIFF into OME-Zarr with 'wotf'
 and with 'tv' warm-started. Per method and device: the build time, the first frame (FFT plans,
 CUDA kernels) and the next one, frames/s of the series, and how far the GPU's Δn lies from the
-CPU's (max |Δn_gpu − Δn_cpu| / max |Δn_cpu|).
+CPU's (max |Δn_gpu − Δn_cpu| / max |Δn_cpu|). With ``--beads``, ``ssdpc beads`` on the PMMA bead
+and on the strong beads of docs/beads.md whose frames are in the cache (the seconds of each fit and
+every bead it found beside the truth).
 
-    python benchmarks/gpu_methods.py --cache DIR [--json OUT.json] [--devices cpu gpu]
+    python benchmarks/gpu_methods.py --cache DIR [--json OUT.json] [--devices cpu gpu] [--beads gpu]
 
 The frames come from ``ssdpc bench``'s cache (simulated there when missing).
 """
@@ -23,6 +25,10 @@ import numpy as np
 
 from napari_ssdpc.backend import get_backend
 from napari_ssdpc.calibration import calibrate
+from napari_ssdpc.reconstruction.beads import measure_beads
+from napari_ssdpc.reconstruction.reconstructor import Reconstructor
+from napari_ssdpc.simulation import phantoms as ph
+from napari_ssdpc.validation import cases as val
 from napari_ssdpc.validation.bench import MULTISLICE_CASE, TV_CASE, TV_NA, TV_SERIES_FRAMES, machine, simulated_case
 from napari_ssdpc.validation.bench_stages import fast_path, series_stage
 
@@ -33,6 +39,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--json", type=Path, default=None, help="write the report here")
     ap.add_argument("--devices", nargs="+", default=["cpu", "gpu"], choices=["cpu", "gpu"])
     ap.add_argument("--no-series", action="store_true", help="skip the 8-frame series")
+    ap.add_argument("--no-methods", action="store_true", help="skip the methods' rows")
+    ap.add_argument("--beads", nargs="*", default=[], choices=["cpu", "gpu"], help="devices of the bead fits")
     args = ap.parse_args(argv)
 
     report: dict = {"machine": machine(), "devices": {d: get_backend(d).name for d in args.devices}, "rows": {}}
@@ -44,7 +52,7 @@ def main(argv=None) -> dict:
     case = simulated_case("bench-pmma-bead", TV_NA, args.cache)
     cal = calibrate(case.white, case.optics)
     dn: dict = {}
-    for device in args.devices:
+    for device in [] if args.no_methods else args.devices:
         for name, cfg, repeats in (
             ("wotf", {**TV_CASE, "method": "wotf"}, 3),
             ("tv", TV_CASE, 2),
@@ -62,7 +70,9 @@ def main(argv=None) -> dict:
             report["rows"][f"{name}_{device}"] = row
             print(f"{name:10s} {device}: build {row['build_s']:.2f} s, frame {row['frame_s']:.3f} s", flush=True)
             save()
-    if "cpu" in args.devices and "gpu" in args.devices:
+    for device in args.beads:
+        bead_rows(report, args.cache, device, save)
+    if "cpu" in args.devices and "gpu" in args.devices and not args.no_methods:
         for name in ("wotf", "tv", "multislice"):
             a, b = dn[(name, "cpu")], dn[(name, "gpu")]
             report["rows"][f"{name}_gpu"]["max_rel_diff_vs_cpu"] = float(np.abs(a - b).max() / np.abs(a).max())
@@ -81,6 +91,43 @@ def main(argv=None) -> dict:
                 save()
     save()
     return report
+
+
+def _bead_cases():
+    """The beads of docs/beads.md (validation cases at condenser NA 0.25): name -> (phantom, its spheres)."""
+    water = 1.333
+    silica = ph.Sphere((0.0, 0.0, 0.0), 5.0, 1.463, medium_index=water)
+    ps = ph.Sphere((0.0, 0.0, 4.0), 5.0, 1.593, medium_index=water)
+    stacked = [ph.Sphere((0.0, 0.0, z), 5.0, 1.463, medium_index=water) for z in (-12.0, 12.0)]
+    return {
+        "silica-5um": (silica, [silica]),
+        "ps-5um": (ps, [ps]),
+        "stacked-silica": (ph.Spheres(stacked, medium_index=water), stacked),
+    }
+
+
+def bead_rows(report: dict, cache: Path, device: str, save) -> None:
+    """``measure_beads`` on the bench's PMMA bead and on the cached bead cases, one row each."""
+    pmma = simulated_case("bench-pmma-bead", TV_NA, cache)
+    cases = [(pmma, [ph.pmma_bead()])]
+    for name, (phantom, spheres) in _bead_cases().items():
+        if (cache / f"{name}_na{TV_NA:g}_s0.npz").is_file():
+            cases.append((val.simulate_case(name, phantom, val.paper_optics(TV_NA), cache_dir=cache), spheres))
+    for case, spheres in cases:
+        cal = calibrate(case.white, case.optics)
+        t0 = time.perf_counter()
+        rec = Reconstructor(val.run_config(case.optics, z=(-30, 30), device=device, method="tv"), cal, flat=case.flat)
+        t1 = time.perf_counter()
+        beads = measure_beads(rec, case.frame)
+        t2 = time.perf_counter()
+        report["rows"][f"beads_{case.name}_{device}"] = {
+            "build_s": t1 - t0,
+            "beads_s": t2 - t1,
+            "beads": [b.to_dict() for b in beads],
+            "truth": [{"centre_um": s.center_um, "diameter_um": s.diameter_um, "ri": s.n} for s in spheres],
+        }
+        print(f"beads {case.name} {device}: {t2 - t1:.1f} s, {len(beads)} bead(s)", flush=True)
+        save()
 
 
 if __name__ == "__main__":

@@ -79,9 +79,9 @@ def cmd_beads(args) -> None:
     from napari_ssdpc.cli.commands import _optics
     from napari_ssdpc.cli.options import config_from_args
     from napari_ssdpc.io.frames import read_frame
+    from napari_ssdpc.pipeline.job import Job
     from napari_ssdpc.progress import tqdm_callback
     from napari_ssdpc.reconstruction.beads import measure_beads
-    from napari_ssdpc.pipeline.job import Job
 
     if not (math.isfinite(args.z_search) and args.z_search >= 0):
         raise SsdpcError(f"--z-search must be a distance >= 0 µm, got {args.z_search}")

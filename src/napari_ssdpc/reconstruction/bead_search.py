@@ -37,6 +37,8 @@ RADIUS_FINE = tuple(np.geomspace(0.5, 1.6, 10))
 Z_STEP_UM = 1.5
 #: Starts of the scan fitted on the coarse model.
 STARTS = 3
+#: Rounds of scans over the beads of a region that holds several (each scanned with the others held).
+ROUNDS = 2
 #: Parameter scales of the fit (x, y, z, R in µm; Δn in hundredths): steps of the same size matter alike.
 SCALE = np.array([1.0, 1.0, 1.0, 1.0, 0.01])
 

@@ -41,6 +41,7 @@ from napari_ssdpc.reconstruction.bead_search import (
     COARSE_DZ_UM,
     FINE_DZ_UM,
     RADIUS_STEPS,
+    ROUNDS,
     STARTS,
     BeadRegion,
     Stopped,
@@ -193,7 +194,7 @@ def fit_beads(
         cands = cands[size >= min_fraction * size.max()]
     out: list[Bead] = []
     groups = overlap_groups(cands, settings.roi_margin_um)
-    total, done = sum(2 * len(g) + 1 for g in groups), [0]
+    total, done = sum(2 * len(g) * (1 if len(g) == 1 else ROUNDS) + 1 for g in groups), [0]
 
     def step(label: str) -> None:
         """One stage of a group done: the progress bar moves on."""
@@ -255,7 +256,9 @@ def _fit_group(
             start = p
         return p, value, converged, region
 
-    for b in range(len(spheres)):
+    # beads that share a region are scanned one at a time with the others held; a second round scans
+    # each again with the others where the first round put them
+    for b in [b for _ in range(1 if len(spheres) == 1 else ROUNDS) for b in range(len(spheres))]:
         found = scan_starts(coarse, spheres, b, z_search_um, sign[b])
         step("beads: scanning depth, size and index")
         fits = [fitted(p, COARSE_DZ_UM, settings.replace(**COARSE)) for _, p in distinct_starts(found, STARTS)]

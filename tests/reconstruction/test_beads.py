@@ -1,0 +1,69 @@
+"""The bead fit's search and fit on views its own model made: a bead the first answer puts too
+shallow and too weak is found where it is, with its size and index; a frame without objects has
+no beads."""
+
+import numpy as np
+import pytest
+
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.physics.multislice_source import square_roi
+from napari_ssdpc.reconstruction.bead_search import BeadRegion
+from napari_ssdpc.reconstruction.beads import bead_candidates, fit_beads
+from napari_ssdpc.reconstruction.contrast import ViewContrast
+from napari_ssdpc.reconstruction.sphere_volume import spheres_volume
+from napari_ssdpc.settings.reconstruction import MultisliceSettings
+
+TRUTH = np.array([[1.2, -0.8, 2.5, 1.6, 0.045]])  # x, y, z, R (µm), Δn
+NOISE = 0.003
+#: a small region and few source points: the search and the fit, not the model's accuracy, are tested
+SETTINGS = MultisliceSettings(roi_margin_um=10.0, source_spacing_na=0.06)
+
+
+@pytest.fixture(scope="module")
+def frame(synthetic_series):
+    """The views of the bead by the model (with noise), and a first answer 3.5 µm too shallow at half its Δn."""
+    optics, cal, flat, _, _ = synthetic_series
+    contrast = ViewContrast(optics, cal, flat)
+    shape = contrast.view_mask.shape
+    roi = square_roi(contrast.x_um, contrast.y_um, tuple(TRUTH[0, :2]), 34.0)
+    region = BeadRegion(contrast, np.ones(shape, np.float32), roi, -1.0, 6.0, 0.5, SETTINGS, None)
+    m = region.model
+    views = np.ones(shape, np.float32)
+    views[:, roi[0], roi[1]] = m.views(spheres_volume(TRUTH, region.z_um, m.y_um, m.x_um, 0.5))
+    views += np.random.default_rng(3).normal(0, NOISE, shape).astype(np.float32)
+    z_um = np.arange(-8.0, 8.01, 1.0)
+    first = TRUTH.copy()
+    first[0, 2] -= 3.5
+    first[0, 4] *= 0.5
+    dn = spheres_volume(first, z_um, contrast.y_um, contrast.x_um, 1.0)
+    return contrast, views, dn, z_um, optics
+
+
+def test_the_candidates_are_the_objects_of_the_first_answer(frame):
+    contrast, _, dn, z_um, _ = frame
+    cands = bead_candidates(dn, z_um, contrast.y_um, contrast.x_um)
+    assert cands.shape == (1, 5)
+    assert cands[0, :3] == pytest.approx([1.2, -0.8, -1.0], abs=0.3)
+    assert cands[0, 3] == pytest.approx(1.6, rel=0.35)
+
+
+def test_a_bead_is_found_at_its_depth_size_and_index(frame):
+    contrast, views, dn, z_um, optics = frame
+    optics = optics.replace(medium_index=1.333)
+    beads = fit_beads(contrast, views, dn, z_um, noise=NOISE, optics=optics, settings=SETTINGS, z_search_um=5.0)
+    assert len(beads) == 1
+    b = beads[0]
+    # the views were made on a larger region than the fit's: its periodic edge costs ~0.3 µm of depth here
+    assert b.centre_um == pytest.approx(tuple(TRUTH[0, :3]), abs=0.5)
+    assert b.diameter_um == pytest.approx(2 * TRUTH[0, 3], rel=0.03)
+    assert b.delta_n == pytest.approx(TRUTH[0, 4], abs=0.002)
+    assert b.ri == pytest.approx(1.333 + b.delta_n)
+    assert b.explained and b.converged and b.note == ""
+
+
+def test_no_objects_no_beads_and_no_noise_is_refused(frame):
+    contrast, views, dn, z_um, optics = frame
+    kw = {"optics": optics, "settings": SETTINGS}
+    assert fit_beads(contrast, views, np.zeros_like(dn), z_um, noise=NOISE, **kw) == []
+    with pytest.raises(SsdpcError, match="noise"):
+        fit_beads(contrast, views, dn, z_um, noise=0.0, **kw)
