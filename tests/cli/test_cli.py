@@ -76,3 +76,21 @@ def test_simulate_names_the_phantoms_own_medium(tmp_path, monkeypatch, capsys):
     err = capsys.readouterr().err
     assert media == [1.33, 1.33]
     assert "medium of index 1.33, not the optics' 1.518" in err and "labelled +0.188 off" in err
+
+
+@pytest.mark.parametrize(
+    ("extra", "words"),
+    [
+        (["--z-search", "-1"], "--z-search must be a distance"),
+        (["--medium-index", "0.5"], "medium_index"),
+        (["--dz", "0"], "dz"),
+    ],
+)
+def test_beads_bad_input_is_one_line_error(cli, files, sums, extra, words):
+    rc, line = cli(["beads", files / "raw.tif", "--calibration", files / "cal.json", *extra])
+    assert rc == 2 and words in line
+
+
+def test_beads_names_a_missing_calibration(cli, files, tmp_path):
+    rc, line = cli(["beads", files / "raw.tif", "--calibration", tmp_path / "none.json"])
+    assert rc == 2 and "none.json" in line
