@@ -15,6 +15,7 @@ import math
 import numpy as np
 from scipy.optimize import minimize
 
+from napari_ssdpc.reconstruction.memory import available_memory
 from napari_ssdpc.reconstruction.sphere_volume import spheres_gradient, spheres_volume
 
 __all__ = ["BeadRegion", "Stopped", "distinct_starts", "local_fit", "overlap_groups", "scan_starts"]
@@ -29,6 +30,10 @@ COARSE = {"source_spacing_na": 0.08}
 #: Δn magnitudes of the scan: 0.004 to 0.32 in steps of 1.4 x (a bead's local minima are 2π of
 #: phase apart, ≥ 0.1 in Δn for a 5 µm bead: each lies within a step of one of these).
 DN_STEPS = 0.004 * 1.4 ** np.arange(14)
+#: The fit's bounds: |Δn| at most this (beyond any bead in a microscope), and the radius at least this
+#: many model pixels.
+DN_LIMIT = 0.6
+MIN_RADIUS_PX = 0.5
 #: Radii of the scan, in units of the candidate's footprint radius.
 RADIUS_STEPS = (0.6, 0.8, 1.0, 1.25, 1.6)
 #: Radii of the last grid of the scan (at the best depth), in the same units.
@@ -49,7 +54,9 @@ class BeadRegion:
     def __init__(self, measurements, views, roi, z_lo: float, z_hi: float, dz: float, settings, backend):
         self.dz = dz
         self.z_um = np.arange(z_lo, z_hi + dz / 2, dz)
-        self.model = measurements.multislice_model(self.z_um, dz, roi, settings, backend=backend)
+        self.model = measurements.multislice_model(
+            self.z_um, dz, roi, settings, backend=backend, max_bytes=available_memory()
+        )
         self.y_um, self.x_um = np.asarray(measurements.y_um)[roi[0]], np.asarray(measurements.x_um)[roi[1]]
         bk = self.model.bk
         self.measured = bk.asarray(self.model.crop(views), np.float32)
@@ -149,10 +156,10 @@ def local_fit(region: BeadRegion, spheres, sign: np.ndarray, iterations: int, sh
     converged : bool
     """
     b = len(spheres)
-    radius_min = 0.5 * region.model.dx
+    radius_min = MIN_RADIUS_PX * region.model.dx
     bounds = []
     for s in sign:
-        dn_bounds = (0.0, 0.6) if s > 0 else (-0.6, 0.0)
+        dn_bounds = (0.0, DN_LIMIT) if s > 0 else (-DN_LIMIT, 0.0)
         bounds += [(None, None)] * 3 + [(radius_min, None), tuple(v / SCALE[4] for v in dn_bounds)]
 
     def fun(q):

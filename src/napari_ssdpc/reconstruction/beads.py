@@ -39,7 +39,9 @@ from napari_ssdpc.physics.multislice_source import square_roi
 from napari_ssdpc.reconstruction.bead_search import (
     COARSE,
     COARSE_DZ_UM,
+    DN_LIMIT,
     FINE_DZ_UM,
+    MIN_RADIUS_PX,
     RADIUS_STEPS,
     ROUNDS,
     STARTS,
@@ -240,6 +242,7 @@ def _fit_group(
         cands[:, 2].min() - depth,
         cands[:, 2].max() + depth,
         COARSE_DZ_UM,
+        DN_LIMIT,
         settings.replace(**COARSE),
         backend,
     )
@@ -291,6 +294,8 @@ def _report(region: BeadRegion, spheres, converged: bool, noise: float, optics, 
         stop = settings.stop_residual_over_noise + settings.model_error**2 * float(contrast_map[foot].mean()) / noise**2
         explained = ratio is not None and ratio <= 2 * max(stop, 1.0)
         notes = [] if converged else ["the fit did not converge"]
+        if abs(dn) >= 0.99 * DN_LIMIT or r <= 1.01 * MIN_RADIUS_PX * m.dx:
+            notes.append("the fit ended on a bound of its Δn or radius (no bead of this frame fits as a sphere)")
         if not explained:
             notes.append(
                 f"the model leaves {ratio or float('nan'):.1f} x the noise over it (a bead fits to {stop:.1f})"
