@@ -242,7 +242,6 @@ def _fit_group(
         cands[:, 2].min() - depth,
         cands[:, 2].max() + depth,
         COARSE_DZ_UM,
-        DN_LIMIT,
         settings.replace(**COARSE),
         backend,
     )
