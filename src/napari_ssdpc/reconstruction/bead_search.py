@@ -42,6 +42,8 @@ RADIUS_FINE = tuple(np.geomspace(0.5, 1.6, 10))
 Z_STEP_UM = 1.5
 #: Starts of the scan fitted on the coarse model.
 STARTS = 3
+#: Coarse fits fitted again on the full model (the better is kept).
+FINE_STARTS = 2
 #: Rounds of scans over the beads of a region that holds several (each scanned with the others held).
 ROUNDS = 2
 #: Parameter scales of the fit (x, y, z, R in µm; Δn in hundredths): steps of the same size matter alike.

@@ -19,7 +19,8 @@ so the fit starts from the best of a scan:
 2. on a coarse model (a source point every 0.08 NA instead of 0.03, 1 µm planes), a scan of radius
    x Δn at the candidate's depth, of depth over ± ``z_search_um`` for the best three, and of radius x
    Δn again at the best depth; the three best distinct starts are fitted on the coarse model;
-3. the best is fitted on the full model (the multislice settings' sampling, 0.5 µm planes).
+3. the best two of those are fitted on the full model (the multislice settings' sampling, 0.5 µm
+   planes), and the better is kept.
 
 Beads whose footprints come near one another are fitted together in one region (their spheres add).
 A bead is reported with the residual of the views over its footprint over the noise, and flagged when
@@ -41,6 +42,7 @@ from napari_ssdpc.reconstruction.bead_search import (
     COARSE_DZ_UM,
     DN_LIMIT,
     FINE_DZ_UM,
+    FINE_STARTS,
     MIN_RADIUS_PX,
     RADIUS_STEPS,
     ROUNDS,
@@ -260,13 +262,18 @@ def _fit_group(
 
     # beads that share a region are scanned one at a time with the others held; a second round scans
     # each again with the others where the first round put them
-    for b in [b for _ in range(1 if len(spheres) == 1 else ROUNDS) for b in range(len(spheres))]:
+    order = [b for _ in range(1 if len(spheres) == 1 else ROUNDS) for b in range(len(spheres))]
+    for b in order:
         found = scan_starts(coarse, spheres, b, z_search_um, sign[b])
         step("beads: scanning depth, size and index")
         fits = [fitted(p, COARSE_DZ_UM, settings.replace(**COARSE)) for _, p in distinct_starts(found, STARTS)]
-        spheres = min(fits, key=lambda a: a[1])[0]
+        fits.sort(key=lambda a: a[1])
+        spheres = fits[0][0]
         step("beads: coarse fit")
-    spheres, _, converged, fine = fitted(spheres, FINE_DZ_UM, settings)
+    # the coarse model's error can rank the minimum one 2π of phase away first: the best two go on
+    last = distinct_starts([(f[1], f[0]) for f in fits], FINE_STARTS)
+    finals = [fitted(p, FINE_DZ_UM, settings) for _, p in last]
+    spheres, _, converged, fine = min(finals, key=lambda a: a[1])
     step("beads: full fit")
     return _report(fine, spheres, converged, noise, optics, settings)
 
