@@ -59,6 +59,8 @@ def test_a_bead_is_found_at_its_depth_size_and_index(frame):
     assert b.delta_n == pytest.approx(TRUTH[0, 4], abs=0.002)
     assert b.ri == pytest.approx(1.333 + b.delta_n)
     assert b.explained and b.converged and b.note == ""
+    # the check of the voxel answer: the first answer holds half the bead's Δn (3.5 µm off in depth)
+    assert b.first_answer_ratio == pytest.approx(0.5, abs=0.05)
 
 
 def test_no_objects_no_beads_and_no_noise_is_refused(frame):

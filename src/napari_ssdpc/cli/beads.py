@@ -61,9 +61,12 @@ def bead_line(i: int, bead) -> str:
     x, y, z = bead.centre_um
     r = bead.residual_over_noise
     check = "" if not bead.note else f"; CHECK: {bead.note}"
+    voxels = (
+        "" if bead.first_answer_ratio is None else f"; the voxel answer holds {bead.first_answer_ratio:.2f} x its Δn"
+    )
     return (
         f"bead {i}: centre ({x:.2f}, {y:.2f}, {z:.2f}) µm, diameter {bead.diameter_um:.2f} µm, RI {bead.ri:.4f} "
-        f"(Δn {bead.delta_n:+.4f}), residual {r if r is not None else float('nan'):.1f} x the noise{check}"
+        f"(Δn {bead.delta_n:+.4f}), residual {r if r is not None else float('nan'):.1f} x the noise{voxels}{check}"
     )
 
 

@@ -30,7 +30,7 @@ the fit did not converge or the model does not explain the views there.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 from scipy import ndimage
@@ -57,7 +57,7 @@ from napari_ssdpc.reconstruction.bead_search import (
 from napari_ssdpc.reconstruction.dpc import phase_to_delta_n
 from napari_ssdpc.reconstruction.fit_objects import object_labels
 
-__all__ = ["Bead", "bead_candidates", "fit_beads", "measure_beads"]
+__all__ = ["Bead", "around_bead", "bead_candidates", "fit_beads", "measure_beads"]
 
 
 @dataclass(frozen=True)
@@ -84,6 +84,9 @@ class Bead:
     note : str
         What a user must know before trusting it ('' when nothing): not converged, not explained,
         overlapping another bead.
+    first_answer_ratio : float or None
+        The voxel answer the beads were found in (e.g. 'tv'), checked against the sphere: its
+        integrated Δn around the bead (:func:`around_bead`) over the sphere's volume x Δn.
     """
 
     centre_um: tuple[float, float, float]
@@ -95,6 +98,7 @@ class Bead:
     converged: bool
     explained: bool
     note: str = ""
+    first_answer_ratio: float | None = None
 
     def to_dict(self) -> dict:
         """Plain numbers for JSON."""
@@ -223,7 +227,40 @@ def fit_beads(
             )
     except Stopped:
         raise Cancelled("the bead fit was stopped") from None
+    voxel = float(
+        np.prod([abs(a[1] - a[0]) if len(a) > 1 else 1.0 for a in (z_um, measurements.y_um, measurements.x_um)])
+    )
+    out = [
+        replace(
+            b,
+            first_answer_ratio=float(np.sum(dn[around_bead(b, z_um, measurements.y_um, measurements.x_um)]))
+            * voxel
+            / (math.pi / 6 * b.diameter_um**3 * b.delta_n),
+        )
+        for b in out
+    ]
     return sorted(out, key=lambda b: -(b.diameter_um**3) * abs(b.delta_n))
+
+
+def around_bead(bead: Bead, z_um, y_um, x_um) -> np.ndarray:
+    """The voxels of a grid around a bead: within 2 µm of its disk laterally and 6 µm of it along z
+    (a voxel answer's blur and its trail along the axis).
+
+    Parameters
+    ----------
+    bead : Bead
+    z_um, y_um, x_um : array_like
+        The grid, µm.
+
+    Returns
+    -------
+    ndarray of bool, (Z, ny, nx)
+    """
+    x, y, z = bead.centre_um
+    r = bead.diameter_um / 2
+    lateral = np.hypot(np.asarray(x_um)[None, :] - x, np.asarray(y_um)[:, None] - y) <= r + 2.0
+    axial = np.abs(np.asarray(z_um) - z) <= r + 6.0
+    return axial[:, None, None] & lateral[None]
 
 
 def _fit_group(

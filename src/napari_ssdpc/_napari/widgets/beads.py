@@ -22,6 +22,7 @@ COLUMNS = (
     ("diameter (µm)", lambda b: round(b.diameter_um, 3)),
     ("RI", lambda b: round(b.ri, 4)),
     ("residual / noise", lambda b: None if b.residual_over_noise is None else round(b.residual_over_noise, 1)),
+    ("voxels / sphere", lambda b: None if b.first_answer_ratio is None else round(b.first_answer_ratio, 2)),
     ("check", lambda b: b.note or "ok"),
 )
 
