@@ -34,14 +34,16 @@ def _dock_tabs(viewer):
     return dock, w
 
 
-def test_the_plugins_menu_holds_the_dock_and_the_objects_only():
-    """The dock holds every step of the workflow; the one other entry measures results over time."""
+def test_the_plugins_menu_holds_the_dock_and_the_measurements_only():
+    """The dock holds every step of the workflow; the other entries measure: results over time, and
+    beads fitted as spheres."""
     from npe2 import PluginManifest
 
     import napari_ssdpc
 
     manifest = PluginManifest.from_file(Path(napari_ssdpc.__file__).parent / "napari.yaml")
-    assert [w.display_name for w in manifest.contributions.widgets] == ["ssDPC", "Objects over time"]
+    names = [w.display_name for w in manifest.contributions.widgets]
+    assert names == ["ssDPC", "Objects over time", "Beads (each fitted as a sphere)"]
 
 
 def test_the_dock_and_widgets_made_by_a_script_share_one_session_and_reach_an_ri_volume(
