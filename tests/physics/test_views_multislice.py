@@ -98,6 +98,27 @@ def test_inputs_are_checked(optics):
     assert abs(np.mean(x[cols]) - 5.0) < optics.object_pixel_um and abs(np.mean(x[rows]) + 3.0) < optics.object_pixel_um
 
 
+@pytest.mark.parametrize("substeps", [1, 2])
+def test_empty_planes_are_one_propagation_step_with_the_same_views(optics, substeps):
+    """Planes of Δn 0 before, between and after the objects: the forward pass merges their slabs into
+    one step (and skips those before the first object); the views are those of every slab."""
+    x = _grid(optics, 20)
+    lenslets = _lit(optics, 20)[::2]
+    z = np.arange(-6.0, 6.01, 1.0)
+    model = ViewsMultislice(optics, lenslets, x, x, z, substeps=substeps, source_spacing_na=0.08, dtype=np.complex128)
+    dn = np.zeros(model.shape)
+    dn[3] = Sphere((1.0, 0.0, 0.0), 3.0, 1.60, medium_index=1.518).volume([0.0], model.y_um, model.x_um).real[0]
+    dn[8] = -0.5 * dn[3].T
+    merged = model.views(dn)
+    screens = model._screens(dn)
+    every = sum(
+        np.einsum("jqk,jqkyx->kyx", model._wgt[sl], np.abs(model._propagate_chunk(screens, sl, False)[0]) ** 2)
+        for sl in model._chunks()
+    )
+    np.testing.assert_allclose(merged, model._interpolate(every) / model._i0, rtol=1e-9, atol=1e-9)
+    assert np.abs(merged - 1).max() > 0.05  # the objects do make contrast
+
+
 # -------------------------------------------------------------------------------- gradient
 @pytest.mark.parametrize("refine, substeps", [(1, 1), (2, 2)])
 def test_gradient_matches_finite_differences(optics, refine, substeps):

@@ -285,15 +285,17 @@ class ViewsMultislice:
         j = self.xp.arange(sl.stop - sl.start)[:, None, None, None]
         return j, self._ey[sl, :, :, None], self._ex[sl, :, None, :]
 
-    def _propagate_chunk(self, screens, sl, keep: bool):
+    def _propagate_chunk(self, screens, sl, keep: bool, empty=None):
         """Lenslet fields g (s, K, m, m) of the source points ``sl``, and the fields after every
-        screen (a list, far side first) when ``keep``."""
+        screen (a list, far side first) when ``keep``. Without ``keep``, the slabs of planes that
+        ``empty`` marks (Δn 0: the screen is 1) are one propagation step together, H_δ^k, and those
+        before the first object none (the plane wave's envelope stays 1)."""
         xp, s = self.xp, sl.stop - sl.start
         kept = []
         if screens is None:  # no sample: the plane wave's envelope is 1
             spec = xp.zeros((s, self.n, self.n), self.cdtype)
             spec[:, 0, 0] = self.n * self.n
-        else:
+        elif keep or empty is None:
             u = xp.ones((s, self.n, self.n), self.cdtype)
             for i in range(len(screens) * self.substeps):
                 if i:
@@ -302,6 +304,21 @@ class ViewsMultislice:
                 if keep:
                     kept.append(u)
             spec = self.bk.fft2(u)
+        else:
+            u, spec, pending = None, None, 0
+            for i in range(len(screens) * self.substeps):
+                pending += i > 0
+                if empty[i // self.substeps]:
+                    continue
+                if u is None:  # the first object: the plane wave reaches it unchanged
+                    u = xp.broadcast_to(screens[i // self.substeps], (s, self.n, self.n))
+                else:
+                    h = self._h[sl] if pending == 1 else self._h[sl] ** pending
+                    u = self.bk.ifft2(self.bk.fft2(u) * h) * screens[i // self.substeps]
+                pending = 0
+            if u is None:
+                return self._propagate_chunk(None, sl, False)
+            spec = self.bk.fft2(u) * self._h[sl] ** pending if pending else self.bk.fft2(u)
         g = self.bk.ifft2(spec[self._gather(sl)][:, None] * self._pair_kernel(sl))  # (s, Q, K, m, m)
         return g.astype(self.cdtype, copy=False), kept
 
@@ -309,8 +326,9 @@ class ViewsMultislice:
         """Σ_j s_jk |g_jk|² on the crop grid (K, m, m), and per chunk what the backward pass needs."""
         acc = self.xp.zeros((self.view_shape[0], self.m, self.m), self.rdtype)
         store = []
+        empty = None if keep or screens is None else [bool(self.xp.all(sc == 1)) for sc in screens]
         for sl in self._chunks():
-            g, kept = self._propagate_chunk(screens, sl, keep)
+            g, kept = self._propagate_chunk(screens, sl, keep, empty)
             acc += self.xp.einsum("jqk,jqkyx->kyx", self._wgt[sl], (g.real**2 + g.imag**2))
             store.append((g, kept) if keep else None)
         return acc, store
