@@ -16,7 +16,9 @@ scattering samples from intensity images", Optica 2019):
 2. Multislice through the volume, far side (largest z) first, once per source point: every voxel of
    thickness dz is cut into ``substeps`` slabs of thickness δ, each a phase screen
    t = exp(i2π Δn δ / λ) followed by angular-spectrum propagation over δ in the medium,
-   H_δ(u) = exp(i2π δ [η(u + w) − η(w)]) (paper Eq. 6, on the envelope V = U exp(−i2π w·x)).
+   H_δ(u) = exp(i2π δ [η(u + w) − η(w)]) (paper Eq. 6, on the envelope V = U exp(−i2π w·x)). In the
+   forward pass the slabs of planes whose Δn is 0 are one step, H_δ^k, and those before the first
+   object none (the plane wave's envelope stays 1); the gradient keeps every slab.
 3. The field leaving the volume under w_j stands for the q x q sub-points w' of its cell (the
    envelope changes slowly with the tilt; the sharp aperture edges do not): for each sub-point, the
    propagation from the last screen (depth z_exit) to the focal plane, exp(i2π z_exit [η(u) − η(w')]),
