@@ -94,3 +94,17 @@ def test_beads_bad_input_is_one_line_error(cli, files, sums, extra, words):
 def test_beads_names_a_missing_calibration(cli, files, tmp_path):
     rc, line = cli(["beads", files / "raw.tif", "--calibration", tmp_path / "none.json"])
     assert rc == 2 and "none.json" in line
+
+
+def test_a_bead_line_gives_its_numbers_and_its_check():
+    from napari_ssdpc.cli.beads import bead_line
+    from napari_ssdpc.reconstruction.beads import Bead
+
+    good = Bead((0.01, -0.02, 4.5), 4.93, 1.4646, 0.1316, 3.0, 5.6, True, True, "", 0.105)
+    line = bead_line(1, good)
+    assert line == (
+        "bead 1: centre (0.01, -0.02, 4.50) µm, diameter 4.93 µm, RI 1.4646 (Δn +0.1316), residual 3.0 x the "
+        "noise; the voxel answer holds 0.10 x its Δn"
+    )
+    flagged = Bead((0.0, 0.0, -10.2), 4.96, 1.56, 0.227, 30.2, 4.6, True, False, "the model leaves 30.2 x the noise")
+    assert bead_line(2, flagged).endswith("x the noise; CHECK: the model leaves 30.2 x the noise")
