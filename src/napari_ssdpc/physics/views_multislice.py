@@ -290,36 +290,29 @@ class ViewsMultislice:
     def _propagate_chunk(self, screens, sl, keep: bool, empty=None):
         """Lenslet fields g (s, K, m, m) of the source points ``sl``, and the fields after every
         screen (a list, far side first) when ``keep``. Without ``keep``, the slabs of planes that
-        ``empty`` marks (Δn 0: the screen is 1) are one propagation step together, H_δ^k, and those
-        before the first object none (the plane wave's envelope stays 1)."""
+        ``empty`` marks (Δn 0: the screen is 1) are one propagation step together, H_δ^k."""
         xp, s = self.xp, sl.stop - sl.start
-        kept = []
-        if screens is None:  # no sample: the plane wave's envelope is 1
+        kept: list = []
+        planes = 0 if screens is None else len(screens)
+        skip = empty if empty is not None and not keep else [False] * planes
+        u, pending = None, 0
+        for i in range(planes * self.substeps):
+            pending += i > 0
+            if skip[i // self.substeps]:
+                continue
+            screen = screens[i // self.substeps]
+            if u is None:  # the plane wave's envelope is 1 up to the first screen: propagation keeps it
+                u = xp.broadcast_to(screen, (s, self.n, self.n))
+            else:  # pending slabs of medium (Eq. 6), then the screen
+                h = self._h[sl] if pending == 1 else self._h[sl] ** pending
+                u = self.bk.ifft2(self.bk.fft2(u) * h) * screen
+            pending = 0
+            if keep:
+                kept.append(u)
+        if u is None:  # no sample (or no object): the plane wave's envelope is 1
             spec = xp.zeros((s, self.n, self.n), self.cdtype)
             spec[:, 0, 0] = self.n * self.n
-        elif keep or empty is None:
-            u = xp.ones((s, self.n, self.n), self.cdtype)
-            for i in range(len(screens) * self.substeps):
-                if i:
-                    u = self.bk.ifft2(self.bk.fft2(u) * self._h[sl])  # one slab of medium (Eq. 6)
-                u = u * screens[i // self.substeps]
-                if keep:
-                    kept.append(u)
-            spec = self.bk.fft2(u)
         else:
-            u, spec, pending = None, None, 0
-            for i in range(len(screens) * self.substeps):
-                pending += i > 0
-                if empty[i // self.substeps]:
-                    continue
-                if u is None:  # the first object: the plane wave reaches it unchanged
-                    u = xp.broadcast_to(screens[i // self.substeps], (s, self.n, self.n))
-                else:
-                    h = self._h[sl] if pending == 1 else self._h[sl] ** pending
-                    u = self.bk.ifft2(self.bk.fft2(u) * h) * screens[i // self.substeps]
-                pending = 0
-            if u is None:
-                return self._propagate_chunk(None, sl, False)
             spec = self.bk.fft2(u) * self._h[sl] ** pending if pending else self.bk.fft2(u)
         g = self.bk.ifft2(spec[self._gather(sl)][:, None] * self._pair_kernel(sl))  # (s, Q, K, m, m)
         return g.astype(self.cdtype, copy=False), kept
