@@ -8,8 +8,9 @@ import pytest
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.multislice_source import square_roi
 from napari_ssdpc.reconstruction.bead_search import BeadRegion
-from napari_ssdpc.reconstruction.beads import bead_candidates, fit_beads
+from napari_ssdpc.reconstruction.beads import fit_beads
 from napari_ssdpc.reconstruction.contrast import ViewContrast
+from napari_ssdpc.reconstruction.fit_objects import bead_candidates
 from napari_ssdpc.reconstruction.sphere_volume import spheres_volume
 from napari_ssdpc.settings.reconstruction import MultisliceSettings
 

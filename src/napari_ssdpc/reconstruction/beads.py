@@ -33,7 +33,6 @@ import math
 from dataclasses import asdict, dataclass, replace
 
 import numpy as np
-from scipy import ndimage
 
 from napari_ssdpc.errors import Cancelled, SsdpcError
 from napari_ssdpc.physics.multislice_source import square_roi
@@ -55,9 +54,10 @@ from napari_ssdpc.reconstruction.bead_search import (
     scan_starts,
 )
 from napari_ssdpc.reconstruction.dpc import phase_to_delta_n
-from napari_ssdpc.reconstruction.fit_objects import object_labels
+from napari_ssdpc.reconstruction.fit_objects import around_bead, bead_candidates
+from napari_ssdpc.reconstruction.nonlinear import discrepancy_stop
 
-__all__ = ["Bead", "around_bead", "bead_candidates", "fit_beads", "measure_beads"]
+__all__ = ["Bead", "fit_beads", "measure_beads"]
 
 
 @dataclass(frozen=True)
@@ -86,7 +86,8 @@ class Bead:
         overlapping another bead.
     first_answer_ratio : float or None
         The voxel answer the beads were found in (e.g. 'tv'), checked against the sphere: its
-        integrated Δn around the bead (:func:`around_bead`) over the sphere's volume x Δn.
+        integrated Δn around the bead
+        (:func:`~napari_ssdpc.reconstruction.fit_objects.around_bead`) over the sphere's volume x Δn.
     """
 
     centre_um: tuple[float, float, float]
@@ -103,41 +104,6 @@ class Bead:
     def to_dict(self) -> dict:
         """Plain numbers for JSON."""
         return asdict(self)
-
-
-def bead_candidates(dn, z_um, y_um, x_um) -> np.ndarray:
-    """The objects of a Δn volume as sphere starts (x, y, z, R, Δn).
-
-    Parameters
-    ----------
-    dn : ndarray, (Z, ny, nx)
-        A first answer (e.g. the 'tv' volume), dimensionless.
-    z_um, y_um, x_um : ndarray
-        Its grid, µm.
-
-    Returns
-    -------
-    ndarray, (B, 5)
-        The |Δn|-weighted centre, the radius of the object's footprint (the disk of its area)
-        and the mean Δn of a sphere of that radius holding the object's integrated Δn; largest first.
-    """
-    dn = np.asarray(dn, float)
-    labels = object_labels(dn)
-    z, y, x = (np.asarray(a, float) for a in (z_um, y_um, x_um))
-    voxel = (abs(z[1] - z[0]) if len(z) > 1 else 1.0) * abs(y[1] - y[0]) * abs(x[1] - x[0])
-    rows = []
-    for c, sl in enumerate(ndimage.find_objects(labels), start=1):
-        if sl is None:
-            continue
-        own = labels[sl] == c
-        w = np.abs(dn[sl]) * own
-        zz, yy, xx = np.meshgrid(z[sl[0]], y[sl[1]], x[sl[2]], indexing="ij")
-        centre = [float(np.sum(g * w) / w.sum()) for g in (xx, yy, zz)]
-        radius = math.sqrt(own.any(axis=0).sum() * abs(y[1] - y[0]) * abs(x[1] - x[0]) / math.pi)
-        integral = float(np.sum(dn[sl] * own)) * voxel
-        rows.append([*centre, radius, integral / (4 / 3 * math.pi * radius**3)])
-    rows.sort(key=lambda r: -abs(r[4]) * r[3] ** 3)
-    return np.array(rows, float).reshape(-1, 5)
 
 
 def fit_beads(
@@ -242,27 +208,6 @@ def fit_beads(
     return sorted(out, key=lambda b: -(b.diameter_um**3) * abs(b.delta_n))
 
 
-def around_bead(bead: Bead, z_um, y_um, x_um) -> np.ndarray:
-    """The voxels of a grid around a bead: within 2 µm of its disk laterally and 6 µm of it along z
-    (a voxel answer's blur and its trail along the axis).
-
-    Parameters
-    ----------
-    bead : Bead
-    z_um, y_um, x_um : array_like
-        The grid, µm.
-
-    Returns
-    -------
-    ndarray of bool, (Z, ny, nx)
-    """
-    x, y, z = bead.centre_um
-    r = bead.diameter_um / 2
-    lateral = np.hypot(np.asarray(x_um)[None, :] - x, np.asarray(y_um)[:, None] - y) <= r + 2.0
-    axial = np.abs(np.asarray(z_um) - z) <= r + 6.0
-    return axial[:, None, None] & lateral[None]
-
-
 def _fit_group(
     measurements, views, cands, noise, optics, settings, z_search_um, iterations, backend, should_stop, step
 ):
@@ -274,6 +219,7 @@ def _fit_group(
     side = max(x1 - x0, y1 - y0) + 2 * settings.roi_margin_um
     roi = square_roi(measurements.x_um, measurements.y_um, ((x0 + x1) / 2, (y0 + y1) / 2), side)
     depth = z_search_um + reach.max() + COARSE_DZ_UM
+    coarse_settings = settings.replace(**COARSE)
     coarse = BeadRegion(
         measurements,
         views,
@@ -281,7 +227,7 @@ def _fit_group(
         cands[:, 2].min() - depth,
         cands[:, 2].max() + depth,
         COARSE_DZ_UM,
-        settings.replace(**COARSE),
+        coarse_settings,
         backend,
     )
     spheres = cands.copy()
@@ -303,7 +249,7 @@ def _fit_group(
     for b in order:
         found = scan_starts(coarse, spheres, b, z_search_um, sign[b])
         step("beads: scanning depth, size and index")
-        fits = [fitted(p, COARSE_DZ_UM, settings.replace(**COARSE)) for _, p in distinct_starts(found, STARTS)]
+        fits = [fitted(p, COARSE_DZ_UM, coarse_settings) for _, p in distinct_starts(found, STARTS)]
         fits.sort(key=lambda a: a[1])
         spheres = fits[0][0]
         step("beads: coarse fit")
@@ -334,7 +280,7 @@ def _report(region: BeadRegion, spheres, converged: bool, noise: float, optics, 
         reach = r + 1.0 + abs(z) * tilt  # the bead's image in the most oblique view
         foot = np.hypot(region.x_um[None, :] - x, region.y_um[:, None] - y) <= reach
         ratio = float(per_pixel[foot].mean()) / noise**2 if foot.any() else None
-        stop = settings.stop_residual_over_noise + settings.model_error**2 * float(contrast_map[foot].mean()) / noise**2
+        stop = discrepancy_stop(settings, float(contrast_map[foot].mean()), noise)
         explained = ratio is not None and ratio <= 2 * max(stop, 1.0)
         notes = [] if converged else ["the fit did not converge"]
         if abs(dn) >= 0.99 * DN_LIMIT or r <= 1.01 * MIN_RADIUS_PX * m.dx:

@@ -1,5 +1,6 @@
 """The objects of a nonlinear fit's region, each with its own check: where it is, its dry mass and how
-well the model explains the views over it (the residual over the noise)."""
+well the model explains the views over it (the residual over the noise); the objects of a voxel
+answer as the starts of the bead fit, and the voxels around a bead."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import math
 import numpy as np
 from scipy import ndimage
 
-__all__ = ["MIN_VOXELS", "OBJECT_LEVEL", "fit_objects", "object_labels"]
+__all__ = ["MIN_VOXELS", "OBJECT_LEVEL", "around_bead", "bead_candidates", "fit_objects", "object_labels"]
 
 #: A voxel belongs to an object when its |Δn| reaches this fraction of the strongest (a pixel of the
 #: region's objects, when its z-projected |Δn| does).
@@ -93,3 +94,60 @@ def fit_objects(dn, misfit_map, z_um, y_um, x_um, *, noise: float, alpha_um3_pg:
             }
         )
     return sorted(out, key=lambda o: -abs(o["dry_mass_pg"]))
+
+
+def bead_candidates(dn, z_um, y_um, x_um) -> np.ndarray:
+    """The objects of a Δn volume as sphere starts (x, y, z, R, Δn).
+
+    Parameters
+    ----------
+    dn : ndarray, (Z, ny, nx)
+        A first answer (e.g. the 'tv' volume), dimensionless.
+    z_um, y_um, x_um : ndarray
+        Its grid, µm.
+
+    Returns
+    -------
+    ndarray, (B, 5)
+        The |Δn|-weighted centre, the radius of the object's footprint (the disk of its area)
+        and the mean Δn of a sphere of that radius holding the object's integrated Δn; largest first.
+    """
+    dn = np.asarray(dn, float)
+    labels = object_labels(dn)
+    z, y, x = (np.asarray(a, float) for a in (z_um, y_um, x_um))
+    voxel = (abs(z[1] - z[0]) if len(z) > 1 else 1.0) * abs(y[1] - y[0]) * abs(x[1] - x[0])
+    rows = []
+    for c, sl in enumerate(ndimage.find_objects(labels), start=1):
+        if sl is None:
+            continue
+        own = labels[sl] == c
+        w = np.abs(dn[sl]) * own
+        zz, yy, xx = np.meshgrid(z[sl[0]], y[sl[1]], x[sl[2]], indexing="ij")
+        centre = [float(np.sum(g * w) / w.sum()) for g in (xx, yy, zz)]
+        radius = math.sqrt(own.any(axis=0).sum() * abs(y[1] - y[0]) * abs(x[1] - x[0]) / math.pi)
+        integral = float(np.sum(dn[sl] * own)) * voxel
+        rows.append([*centre, radius, integral / (4 / 3 * math.pi * radius**3)])
+    rows.sort(key=lambda r: -abs(r[4]) * r[3] ** 3)
+    return np.array(rows, float).reshape(-1, 5)
+
+
+def around_bead(bead, z_um, y_um, x_um) -> np.ndarray:
+    """The voxels of a grid around a bead: within 2 µm of its disk laterally and 6 µm of it along z
+    (a voxel answer's blur and its trail along the axis).
+
+    Parameters
+    ----------
+    bead : Bead
+        Its ``centre_um`` and ``diameter_um``.
+    z_um, y_um, x_um : array_like
+        The grid, µm.
+
+    Returns
+    -------
+    ndarray of bool, (Z, ny, nx)
+    """
+    x, y, z = bead.centre_um
+    r = bead.diameter_um / 2
+    lateral = np.hypot(np.asarray(x_um)[None, :] - x, np.asarray(y_um)[:, None] - y) <= r + 2.0
+    axial = np.abs(np.asarray(z_um) - z) <= r + 6.0
+    return axial[:, None, None] & lateral[None]

@@ -27,7 +27,7 @@ from typing import Any, Protocol, runtime_checkable
 from napari_ssdpc.backend import Backend
 from napari_ssdpc.errors import SsdpcError
 
-__all__ = ["Fit", "FitResult", "NonlinearModel", "Unknowns", "projected_gradient", "smoothed_tv"]
+__all__ = ["Fit", "FitResult", "NonlinearModel", "Unknowns", "discrepancy_stop", "projected_gradient", "smoothed_tv"]
 
 #: ε of the smoothed TV, Δn per µm: far below any edge of a sample, so TV_ε is TV where it matters.
 TV_EPSILON = 1e-4
@@ -70,6 +70,30 @@ class NonlinearModel(Protocol):
         weight : ndarray, broadcastable to (K, h, w), optional
         """
         ...
+
+
+def discrepancy_stop(settings, contrast: float, noise: float) -> float:
+    """Where a nonlinear fit of the views stops, in mean squared residual over the noise variance.
+
+    The discrepancy principle: a fit closer than the noise and the model's own error fits them; the
+    model's error is a share (``settings.model_error``) of the views' contrast, larger for a stronger
+    object.
+
+    Parameters
+    ----------
+    settings : MultisliceSettings
+        ``stop_residual_over_noise`` and ``model_error``.
+    contrast : float
+        The views' mean squared contrast (I/I0 − 1)², flat-field units².
+    noise : float
+        The views' noise σ, flat-field units (0: unknown, the model's share left out).
+
+    Returns
+    -------
+    float
+    """
+    share = settings.model_error**2 * contrast / noise**2 if noise > 0 else 0.0
+    return settings.stop_residual_over_noise + share
 
 
 def smoothed_tv(x, voxel_um, eps: float, xp):

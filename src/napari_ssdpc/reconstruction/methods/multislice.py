@@ -43,7 +43,7 @@ from napari_ssdpc.reconstruction.fit_objects import OBJECT_LEVEL, fit_objects
 from napari_ssdpc.reconstruction.memory import available_memory
 from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
 from napari_ssdpc.reconstruction.methods.tv import TvMethod
-from napari_ssdpc.reconstruction.nonlinear import Fit, Unknowns, projected_gradient
+from napari_ssdpc.reconstruction.nonlinear import Fit, Unknowns, discrepancy_stop, projected_gradient
 from napari_ssdpc.reconstruction.proximal import bounds
 from napari_ssdpc.reconstruction.regularised import TvState
 
@@ -185,9 +185,7 @@ class MultisliceMethod(PhaseMethod):
         noise = noise if math.isfinite(noise) else 0.0
         n_data = max(float(bk.xp.sum(weight)), 1.0)
         contrast = float(bk.xp.sum(weight * (measured - 1.0) ** 2)) / n_data  # the views' mean squared contrast
-        # the discrepancy principle: a fit closer than the noise and the model's own error fits them
-        # (the model's error is a share of the views' contrast: larger for a stronger object)
-        stop = ms.stop_residual_over_noise + (ms.model_error**2 * contrast / noise**2 if noise > 0 else 0.0)
+        stop = discrepancy_stop(ms, contrast, noise)
         enough = 0.5 * n_data * noise**2 * stop
         lo, hi = bounds(_sign_of(start), s.settings.tv.dn_max)  # in Δn
         # inside the field stop, and off the region's edge, which is held at the medium
