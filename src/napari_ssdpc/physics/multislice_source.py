@@ -17,7 +17,7 @@ from napari_ssdpc.physics.apertures import disk_fraction, kohler_source, lenslet
 from napari_ssdpc.physics.pupil import Pupil
 from napari_ssdpc.settings.optics import Optics
 
-__all__ = ["even_fast", "lenslet_crops", "source_quadrature", "square_roi"]
+__all__ = ["CropInterpolation", "even_fast", "lenslet_crops", "source_quadrature", "square_roi"]
 
 
 def even_fast(m: int) -> int:
@@ -147,3 +147,60 @@ def lenslet_crops(w, w_sub, u_k, du: float, m: int, n: int):
     inx = ((ex >= -(n // 2)) & (ex < n - n // 2))[:, None]
     iny = ((ey >= -(n // 2)) & (ey < n - n // 2))[:, None]
     return ex, ey, ux, uy, inx, iny
+
+
+class CropInterpolation:
+    """E: a band-limited intensity on the m x m crop grid -> the views' nv x nv pixels (Fourier
+    interpolation, averaged over the sensor pixel by its sinc), and its exact transpose.
+
+    Parameters
+    ----------
+    m, nv : int
+        Sides of the crop grid and of the views' region.
+    pixel_cycles : float
+        The view pixel times the crop grid's frequency step (the sinc's argument per frequency index).
+    pixel_integration : bool
+        Average over the sensor pixel; otherwise sample.
+    bk : Backend
+    rdtype : numpy dtype
+        Real dtype of the results.
+    """
+
+    def __init__(self, m: int, nv: int, pixel_cycles: float, pixel_integration: bool, bk, rdtype):
+        fm = np.fft.fftfreq(m, 1.0 / m).astype(int)
+        pix = np.sinc(pixel_cycles * fm) if pixel_integration else np.ones(m)
+        self.m, self.nv, self.bk, self.rdtype = m, nv, bk, rdtype
+        self._band = bk.xp.asarray(fm % nv)
+        self._pix = bk.xp.asarray((pix[:, None] * pix[None, :]).astype(rdtype))
+
+    def __call__(self, im):
+        """E of an intensity.
+
+        Parameters
+        ----------
+        im : ndarray, (K, m, m)
+
+        Returns
+        -------
+        ndarray, (K, nv, nv)
+        """
+        nv, m = self.nv, self.m
+        spec = self.bk.fft2(im) * self._pix
+        out = self.bk.xp.zeros((im.shape[0], nv, nv), spec.dtype)
+        out[:, self._band[:, None], self._band[None, :]] = spec
+        return (self.bk.ifft2(out).real * (nv * nv / (m * m))).astype(self.rdtype)
+
+    def adjoint(self, grad):
+        """Eᵀ of a gradient on the views' pixels.
+
+        Parameters
+        ----------
+        grad : ndarray, (K, nv, nv)
+
+        Returns
+        -------
+        ndarray, (K, m, m)
+        """
+        nv = self.nv
+        spec = self.bk.fft2(grad)[:, self._band[:, None], self._band[None, :]] / (nv * nv)
+        return (self.bk.ifft2(spec * self._pix).real * (nv * nv)).astype(self.rdtype)

@@ -59,7 +59,7 @@ import numpy as np
 
 from napari_ssdpc.backend import Backend, get_backend
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.physics.multislice_source import even_fast, lenslet_crops, source_quadrature
+from napari_ssdpc.physics.multislice_source import CropInterpolation, even_fast, lenslet_crops, source_quadrature
 from napari_ssdpc.physics.pupil import Pupil, eta
 from napari_ssdpc.physics.waves import defocus_factor
 from napari_ssdpc.settings.optics import Optics
@@ -216,8 +216,7 @@ class ViewsMultislice:
         self.z_exit, self._k2 = z_exit, (nm / lam) ** 2
         eta0 = np.sqrt(self._k2 - np.sum(w_sub**2, axis=-1))  # η(w') of every sub-point, (S, Q)
         # --- intensity: m-crop grid -> the views' pixels (Fourier interpolation, pixel sinc) -----
-        fm = np.fft.fftfreq(m, 1.0 / m).astype(int)
-        pix = np.sinc(px * fm * du) if pixel_integration else np.ones(m)
+        self._interpolate = CropInterpolation(m, nv, px * du, pixel_integration, self.bk, self.rdtype)
         self.view_shape = (len(u_k), nv, nv)
         xp_ = self.xp
         self._h = xp_.asarray(h_slab.astype(self.cdtype))
@@ -227,8 +226,6 @@ class ViewsMultislice:
         self._inx, self._iny = xp_.asarray(inx), xp_.asarray(iny)
         self._uk = tuple(xp_.asarray(u_k[:, i].astype(np.float32))[:, None, None] for i in range(2))
         self._eta0 = xp_.asarray(eta0.astype(np.float32))[..., None, None, None]
-        self._band = xp_.asarray(fm % nv)
-        self._pix = xp_.asarray((pix[:, None] * pix[None, :]).astype(self.rdtype))
         self._kernels: list | None = None
         i0 = self._interpolate(self._intensity(None)[0])  # sample-free views: constant per lenslet
         self.i0 = np.asarray(self.bk.to_host(i0.mean(axis=(1, 2))), float)
@@ -328,20 +325,6 @@ class ViewsMultislice:
             store.append((g, kept) if keep else None)
         return acc, store
 
-    def _interpolate(self, im):
-        """E: (K, m, m) intensity on the crop grid -> (K, nv, nv) on the views' pixels."""
-        xp, nv, m = self.xp, self.nv, self.m
-        spec = self.bk.fft2(im) * self._pix
-        out = xp.zeros((im.shape[0], nv, nv), spec.dtype)
-        out[:, self._band[:, None], self._band[None, :]] = spec
-        return (self.bk.ifft2(out).real * (nv * nv / (m * m))).astype(self.rdtype)
-
-    def _interpolate_adjoint(self, grad):
-        """Eᵀ: (K, nv, nv) -> (K, m, m), the exact transpose of :meth:`_interpolate`."""
-        nv, m = self.nv, self.m
-        spec = self.bk.fft2(grad)[:, self._band[:, None], self._band[None, :]] / (nv * nv)
-        return (self.bk.ifft2(spec * self._pix).real * (m * m) * (nv * nv / (m * m))).astype(self.rdtype)
-
     def views(self, dn):
         """The flat-fielded views I_k / I0_k of a Δn volume on the ROI.
 
@@ -401,7 +384,7 @@ class ViewsMultislice:
         res = self._interpolate(acc) / self._i0 - xp.asarray(measured, self.rdtype)
         wres = res if weight is None else res * xp.asarray(weight, self.rdtype)
         value = 0.5 * float(xp.sum(res * wres))
-        g_i = self._interpolate_adjoint(wres / self._i0)  # ∂L/∂I on the crop grid, (K, m, m)
+        g_i = self._interpolate.adjoint(wres / self._i0)  # ∂L/∂I on the crop grid, (K, m, m)
         grad = xp.zeros((len(screens) * self.substeps, self.n, self.n), self.rdtype)
         for sl, st in zip(self._chunks(), store):
             g, kept = st if st is not None else self._propagate_chunk(screens, sl, True)
