@@ -7,7 +7,7 @@ import pytest
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.multislice_source import square_roi
-from napari_ssdpc.reconstruction.bead_search import BeadRegion
+from napari_ssdpc.reconstruction.bead_search import BeadRegion, wave_neighbours
 from napari_ssdpc.reconstruction.beads import fit_beads
 from napari_ssdpc.reconstruction.contrast import ViewContrast
 from napari_ssdpc.reconstruction.fit_objects import bead_candidates
@@ -70,3 +70,27 @@ def test_no_objects_no_beads_and_no_noise_is_refused(frame):
     assert fit_beads(contrast, views, np.zeros_like(dn), z_um, noise=NOISE, **kw) == []
     with pytest.raises(SsdpcError, match="noise"):
         fit_beads(contrast, views, dn, z_um, noise=0.0, **kw)
+
+
+def test_two_beads_on_one_axis_leave_a_minimum_one_wave_away_together(synthetic_series):
+    """Of two beads on one axis, the one nearer the objective one wave of phase too strong and 1.5 µm
+    too near, the other 1.5 µm too far: among the starts one wave away (both moved at once) the
+    truth is the best."""
+    optics, cal, flat, _, _ = synthetic_series
+    contrast = ViewContrast(optics, cal, flat)
+    shape = contrast.view_mask.shape
+    truth = np.array([[0.5, 0.3, -4.0, 1.6, 0.1], [0.5, 0.3, 4.0, 1.6, 0.1]])
+    roi = square_roi(contrast.x_um, contrast.y_um, (0.5, 0.3), 24.0)
+    region = BeadRegion(contrast, np.ones(shape, np.float32), roi, -9.0, 9.0, 1.0, SETTINGS, None)
+    m = region.model
+    views = np.ones(shape, np.float32)
+    views[:, roi[0], roi[1]] = m.views(spheres_volume(truth, region.z_um, m.y_um, m.x_um, 1.0))
+    region = BeadRegion(contrast, views, roi, -9.0, 9.0, 1.0, SETTINGS, None)
+    wave = optics.wavelength_um / (2 * 1.6)
+    wrong = truth.copy()
+    wrong[0, 2:5:2] += (-1.5, wave)
+    wrong[1, 2] += 1.5
+    found = wave_neighbours(region, wrong, np.ones(2), optics.wavelength_um)
+    assert len(found) == 15 * 10  # the lower bead's Δn one wave down, kept or up; the upper's not below 0
+    best = min(found, key=lambda a: a[0])[1]
+    np.testing.assert_allclose(best, truth, atol=1e-6)

@@ -10,6 +10,7 @@ depth over ± the search range for the best three, radius x Δn again at the bes
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -18,7 +19,15 @@ from scipy.optimize import minimize
 from napari_ssdpc.reconstruction.memory import available_memory
 from napari_ssdpc.reconstruction.sphere_volume import spheres_gradient, spheres_volume
 
-__all__ = ["BeadRegion", "Stopped", "distinct_starts", "local_fit", "overlap_groups", "scan_starts"]
+__all__ = [
+    "BeadRegion",
+    "Stopped",
+    "distinct_starts",
+    "local_fit",
+    "overlap_groups",
+    "scan_starts",
+    "wave_neighbours",
+]
 
 #: Depth of the full model's planes, µm (a bead's phase is sampled as finely as the simulators do).
 FINE_DZ_UM = 0.5
@@ -46,6 +55,8 @@ STARTS = 3
 FINE_STARTS = 2
 #: Rounds of scans over the beads of a region that holds several (each scanned with the others held).
 ROUNDS = 2
+#: Depth offsets of the wave-neighbour scan of beads that share a region, µm.
+WAVE_DEPTHS_UM = (-3.0, -1.5, 0.0, 1.5, 3.0)
 #: Parameter scales of the fit (x, y, z, R in µm; Δn in hundredths): steps of the same size matter alike.
 SCALE = np.array([1.0, 1.0, 1.0, 1.0, 0.01])
 
@@ -182,7 +193,7 @@ class Stopped(Exception):
     """The fit was asked to stop."""
 
 
-def distinct_starts(found, count: int = 3):
+def distinct_starts(found, count: int = 3, exclude=()):
     """The best starts that differ in depth (1 µm), radius or Δn (20 %).
 
     Parameters
@@ -190,6 +201,8 @@ def distinct_starts(found, count: int = 3):
     found : list of (float, ndarray (B, 5))
         (misfit, spheres) pairs.
     count : int
+    exclude : sequence of ndarray (B, 5)
+        Spheres already fitted: starts close to them are left out.
 
     Returns
     -------
@@ -198,7 +211,7 @@ def distinct_starts(found, count: int = 3):
     """
     out: list = []
     for f, p in sorted(found, key=lambda a: a[0]):
-        if all(np.abs(p - q).max() > 0 and not _close(p, q) for _, q in out):
+        if all(np.abs(p - q).max() > 0 and not _close(p, q) for q in [*exclude, *(q for _, q in out)]):
             out.append((f, p))
         if len(out) == count:
             break
@@ -253,6 +266,55 @@ def scan_starts(region: BeadRegion, spheres, b: int, z_search_um: float, sign: f
     found += [at(z, p[b, 3], p[b, 4]) for _, p in distinct_starts(found) for z in depths]
     best = min(found, key=lambda a: a[0])[1]
     return found + grid(best[b, 2], RADIUS_FINE)
+
+
+def wave_neighbours(region: BeadRegion, spheres, sign, wavelength_um: float):
+    """Starts one wave of phase away: each sphere's Δn one wave through its centre down, kept or up,
+    with its depth moved by :data:`WAVE_DEPTHS_UM`; every combination for two spheres, one sphere at
+    a time (the others held) for more.
+
+    Beads on one axis see each other's light: a bead scanned while the other sits in a wrong
+    minimum settles in a minimum a wave away (and a little off in depth, where the same phase
+    focuses), which a fit of one bead at a time cannot leave. The combinations leave it together.
+
+    Parameters
+    ----------
+    region : BeadRegion
+        The coarse region.
+    spheres : ndarray, (B, 5)
+        The fitted spheres.
+    sign : ndarray, (B,)
+        Sign of each sphere's Δn (kept).
+    wavelength_um : float
+        Vacuum wavelength, µm: a sphere of radius R delays one wave more through its centre per
+        λ / 2R of Δn.
+
+    Returns
+    -------
+    list of (float, ndarray (B, 5))
+        Every (misfit, spheres) tried that the region covers.
+    """
+    options = []
+    for s, sg in zip(spheres, sign, strict=True):
+        wave = wavelength_um / (2 * s[3])
+        dns = [s[4] + k * wave for k in (-1, 0, 1)]
+        options.append([(s[2] + dz, dn) for dn in dns if 0 < sg * dn <= DN_LIMIT for dz in WAVE_DEPTHS_UM])
+    if len(spheres) == 2:
+        trials = [np.array(c) for c in itertools.product(*options)]
+    else:
+        trials = []
+        for b, opts in enumerate(options):
+            for o in opts:
+                t = spheres[:, [2, 4]].copy()
+                t[b] = o
+                trials.append(t)
+    found = []
+    for t in trials:
+        p = spheres.copy()
+        p[:, [2, 4]] = t
+        if region.covers(p):
+            found.append((region.misfit(p), p))
+    return found
 
 
 def overlap_groups(cands, margin_um: float):

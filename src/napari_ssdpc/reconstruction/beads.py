@@ -22,7 +22,11 @@ so the fit starts from the best of a scan:
 3. the best two of those are fitted on the full model (the multislice settings' sampling, 0.5 µm
    planes), and the better is kept.
 
-Beads whose footprints come near one another are fitted together in one region (their spheres add).
+Beads whose footprints come near one another are fitted together in one region (their spheres add):
+each is scanned with the others held, twice over, and then the starts one wave of phase away for all
+of them at once (each Δn one wave through the centre down, kept or up, each depth moved by up to
+3 µm) are ranked and the best fitted: a bead on the axis of another sees its light and can settle a
+wave away while the other is wrong.
 A bead is reported with the residual of the views over its footprint over the noise, and flagged when
 the fit did not converge or the model does not explain the views there.
 """
@@ -52,6 +56,7 @@ from napari_ssdpc.reconstruction.bead_search import (
     local_fit,
     overlap_groups,
     scan_starts,
+    wave_neighbours,
 )
 from napari_ssdpc.reconstruction.dpc import phase_to_delta_n
 from napari_ssdpc.reconstruction.fit_objects import around_bead, bead_candidates
@@ -151,7 +156,7 @@ def fit_beads(
     backend : {'cpu', 'gpu'} or Backend, optional
     progress : callable, optional
         ``progress(done, total, label)`` after each stage (the scan, the coarse fit of every bead; the
-        full fit of every group).
+        starts one wave away and the full fit of every group).
     should_stop : callable, optional
         Checked at every evaluation; True stops with :class:`~napari_ssdpc.errors.Cancelled`.
 
@@ -166,31 +171,15 @@ def fit_beads(
     if len(cands):
         size = np.abs(cands[:, 4]) * cands[:, 3] ** 3
         cands = cands[size >= min_fraction * size.max()]
-    out: list[Bead] = []
     groups = overlap_groups(cands, settings.roi_margin_um)
-    total, done = sum(2 * len(g) * (1 if len(g) == 1 else ROUNDS) + 1 for g in groups), [0]
-
-    def step(label: str) -> None:
-        """One stage of a group done: the progress bar moves on."""
-        done[0] += 1
-        if progress is not None:
-            progress(done[0], total, label)
-
+    total = sum(2 * len(g) * (1 if len(g) == 1 else ROUNDS) + (1 if len(g) == 1 else 2) for g in groups)
+    job = _GroupFit(
+        measurements, views, noise, optics, settings, z_search_um, iterations, backend, should_stop, progress, total
+    )
+    out: list[Bead] = []
     try:
         for g in groups:
-            out += _fit_group(
-                measurements,
-                views,
-                cands[g],
-                noise,
-                optics,
-                settings,
-                z_search_um,
-                iterations,
-                backend,
-                should_stop,
-                step,
-            )
+            out += job.fit(cands[g])
     except Stopped:
         raise Cancelled("the bead fit was stopped") from None
     voxel = float(
@@ -208,57 +197,82 @@ def fit_beads(
     return sorted(out, key=lambda b: -(b.diameter_um**3) * abs(b.delta_n))
 
 
-def _fit_group(
-    measurements, views, cands, noise, optics, settings, z_search_um, iterations, backend, should_stop, step
-):
-    """The spheres of one group of candidates, fitted together in one region."""
-    sign = np.where(cands[:, 4] < 0, -1.0, 1.0)
-    reach = RADIUS_STEPS[-1] * cands[:, 3]
-    x0, x1 = np.min(cands[:, 0] - reach), np.max(cands[:, 0] + reach)
-    y0, y1 = np.min(cands[:, 1] - reach), np.max(cands[:, 1] + reach)
-    side = max(x1 - x0, y1 - y0) + 2 * settings.roi_margin_um
-    roi = square_roi(measurements.x_um, measurements.y_um, ((x0 + x1) / 2, (y0 + y1) / 2), side)
-    depth = z_search_um + reach.max() + COARSE_DZ_UM
-    coarse_settings = settings.replace(**COARSE)
-    coarse = BeadRegion(
-        measurements,
-        views,
-        roi,
-        cands[:, 2].min() - depth,
-        cands[:, 2].max() + depth,
-        COARSE_DZ_UM,
-        coarse_settings,
-        backend,
-    )
-    spheres = cands.copy()
+@dataclass
+class _GroupFit:
+    """The fit of one group of candidates after another, in one region each (the inputs of
+    :func:`fit_beads`)."""
 
-    def fitted(start, dz, model_settings):
+    measurements: object
+    views: np.ndarray
+    noise: float
+    optics: object
+    settings: object
+    z_search_um: float
+    iterations: int
+    backend: object
+    should_stop: object
+    progress: object = None
+    total: int = 0
+    done: int = 0
+
+    def step(self, label: str) -> None:
+        """One stage done: the progress bar moves on."""
+        self.done += 1
+        if self.progress is not None:
+            self.progress(self.done, self.total, label)
+
+    def region(self, roi, lo: float, hi: float, dz: float, settings) -> BeadRegion:
+        """The views of the region ``roi`` and their model on planes ``lo``..``hi`` every ``dz``, µm."""
+        return BeadRegion(self.measurements, self.views, roi, lo, hi, dz, settings, self.backend)
+
+    def local(self, roi, start, sign, dz: float, settings):
         """A local fit on the planes the spheres fill (again on wider ones where one moves out of them)."""
         for _ in range(3):
             lo, hi = np.min(start[:, 2] - start[:, 3]) - 2.0, np.max(start[:, 2] + start[:, 3]) + 2.0
-            region = BeadRegion(measurements, views, roi, lo, hi, dz, model_settings, backend)
-            p, value, converged = local_fit(region, start, sign, iterations, should_stop)
+            region = self.region(roi, lo, hi, dz, settings)
+            p, value, converged = local_fit(region, start, sign, self.iterations, self.should_stop)
             if region.covers(p):
                 break
             start = p
         return p, value, converged, region
 
-    # beads that share a region are scanned one at a time with the others held; a second round scans
-    # each again with the others where the first round put them
-    order = [b for _ in range(1 if len(spheres) == 1 else ROUNDS) for b in range(len(spheres))]
-    for b in order:
-        found = scan_starts(coarse, spheres, b, z_search_um, sign[b])
-        step("beads: scanning depth, size and index")
-        fits = [fitted(p, COARSE_DZ_UM, coarse_settings) for _, p in distinct_starts(found, STARTS)]
-        fits.sort(key=lambda a: a[1])
-        spheres = fits[0][0]
-        step("beads: coarse fit")
-    # the coarse model's error can rank the minimum one 2π of phase away first: the best two go on
-    last = distinct_starts([(f[1], f[0]) for f in fits], FINE_STARTS)
-    finals = [fitted(p, FINE_DZ_UM, settings) for _, p in last]
-    spheres, _, converged, fine = min(finals, key=lambda a: a[1])
-    step("beads: full fit")
-    return _report(fine, spheres, converged, noise, optics, settings)
+    def fit(self, cands) -> list[Bead]:
+        """The spheres of one group of candidates, fitted together in one region."""
+        sign = np.where(cands[:, 4] < 0, -1.0, 1.0)
+        reach = RADIUS_STEPS[-1] * cands[:, 3]
+        x0, x1 = np.min(cands[:, 0] - reach), np.max(cands[:, 0] + reach)
+        y0, y1 = np.min(cands[:, 1] - reach), np.max(cands[:, 1] + reach)
+        side = max(x1 - x0, y1 - y0) + 2 * self.settings.roi_margin_um
+        roi = square_roi(self.measurements.x_um, self.measurements.y_um, ((x0 + x1) / 2, (y0 + y1) / 2), side)
+        depth = self.z_search_um + reach.max() + COARSE_DZ_UM
+        coarse_settings = self.settings.replace(**COARSE)
+        lo, hi = cands[:, 2].min() - depth, cands[:, 2].max() + depth
+        coarse = self.region(roi, lo, hi, COARSE_DZ_UM, coarse_settings)
+        spheres = cands.copy()
+
+        # beads that share a region are scanned one at a time with the others held; a second round
+        # scans each again with the others where the first round put them
+        order = [b for _ in range(1 if len(spheres) == 1 else ROUNDS) for b in range(len(spheres))]
+        for b in order:
+            found = scan_starts(coarse, spheres, b, self.z_search_um, sign[b])
+            self.step("beads: scanning depth, size and index")
+            fits = [self.local(roi, p, sign, COARSE_DZ_UM, coarse_settings) for _, p in distinct_starts(found, STARTS)]
+            fits.sort(key=lambda a: a[1])
+            spheres = fits[0][0]
+            self.step("beads: coarse fit")
+        if len(spheres) > 1:
+            # beads on one axis: the minima one wave of phase away, moved together
+            found = wave_neighbours(coarse, spheres, sign, self.optics.wavelength_um)
+            starts = distinct_starts(found, STARTS, exclude=[f[0] for f in fits])
+            fits += [self.local(roi, p, sign, COARSE_DZ_UM, coarse_settings) for _, p in starts]
+            fits.sort(key=lambda a: a[1])
+            self.step("beads: one wave of phase away")
+        # the coarse model's error can rank the minimum one 2π of phase away first: the best two go on
+        last = distinct_starts([(f[1], f[0]) for f in fits], FINE_STARTS)
+        finals = [self.local(roi, p, sign, FINE_DZ_UM, self.settings) for _, p in last]
+        spheres, _, converged, fine = min(finals, key=lambda a: a[1])
+        self.step("beads: full fit")
+        return _report(fine, spheres, converged, self.noise, self.optics, self.settings)
 
 
 def _report(region: BeadRegion, spheres, converged: bool, noise: float, optics, settings) -> list[Bead]:
