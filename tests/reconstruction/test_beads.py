@@ -81,11 +81,11 @@ def test_two_beads_on_one_axis_leave_a_minimum_one_wave_away_together(synthetic_
     shape = contrast.view_mask.shape
     truth = np.array([[0.5, 0.3, -4.0, 1.6, 0.1], [0.5, 0.3, 4.0, 1.6, 0.1]])
     roi = square_roi(contrast.x_um, contrast.y_um, (0.5, 0.3), 24.0)
-    region = BeadRegion(contrast, np.ones(shape, np.float32), roi, -9.0, 9.0, 1.0, SETTINGS, None)
+    region = BeadRegion(contrast, np.ones(shape, np.float32), roi, -12.0, 12.0, 1.0, SETTINGS, None)
     m = region.model
     views = np.ones(shape, np.float32)
     views[:, roi[0], roi[1]] = m.views(spheres_volume(truth, region.z_um, m.y_um, m.x_um, 1.0))
-    region = BeadRegion(contrast, views, roi, -9.0, 9.0, 1.0, SETTINGS, None)
+    region = BeadRegion(contrast, views, roi, -12.0, 12.0, 1.0, SETTINGS, None)
     wave = optics.wavelength_um / (2 * 1.6)
     wrong = truth.copy()
     wrong[0, 2:5:2] += (-1.5, wave)
