@@ -81,6 +81,23 @@ def test_2_4_extra_outputs_are_guarded_and_written_as_one_set(files, sums, cli, 
         assert 'PhysicalSizeZ="2.0"' in tif.ome_metadata  # item 14: a single plane keeps its dz
 
 
+def test_the_configs_outputs_are_written_beside_a_single_frame(files, sums, cli, rec_args, tmp_path):
+    """`outputs: save: [...]` of a run configuration writes one file per quantity (as --save does),
+    and --save replaces the config's list."""
+    cfg = tmp_path / "run.yaml"
+    cfg.write_text("outputs:\n  save: [opd_nm, phase]\n")
+    out = tmp_path / "out.ome.tif"
+    rc, err = cli(rec_args(out, "--config", cfg))
+    assert rc == 0, err
+    written = sorted(p.name for p in tmp_path.glob("out*.ome.tif"))
+    assert written == ["out.ome.tif", "out_opd_nm.ome.tif", "out_phase.ome.tif"]
+    with tifffile.TiffFile(tmp_path / "out_opd_nm.ome.tif") as tif:
+        assert np.abs(tif.asarray()).max() > 0
+    other = tmp_path / "other.ome.tif"
+    assert cli(rec_args(other, "--config", cfg, "--save", "phase"))[0] == 0
+    assert sorted(p.name for p in tmp_path.glob("other*.ome.tif")) == ["other.ome.tif", "other_phase.ome.tif"]
+
+
 # ------------------------------------------------------- 5, 6: nonsense written
 def _bad_frames(flat):
     top = 4095

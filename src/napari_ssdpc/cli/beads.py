@@ -79,8 +79,7 @@ def cmd_beads(args) -> None:
         The parsed options of ``ssdpc beads`` (see ``ssdpc beads --help``).
     """
     from napari_ssdpc.calibration.result import Calibration
-    from napari_ssdpc.cli.commands import _optics
-    from napari_ssdpc.cli.options import config_from_args
+    from napari_ssdpc.cli.options import config_from_args, optics_file
     from napari_ssdpc.io.frames import read_frame
     from napari_ssdpc.pipeline.job import Job
     from napari_ssdpc.progress import tqdm_callback
@@ -89,7 +88,7 @@ def cmd_beads(args) -> None:
     if not (math.isfinite(args.z_search) and args.z_search >= 0):
         raise SsdpcError(f"--z-search must be a distance >= 0 µm, got {args.z_search}")
     cal = Calibration.from_json(args.calibration)
-    cfg = config_from_args(args, None if args.optics is None else _optics(args.optics), fallback=cal.optics)
+    cfg = config_from_args(args, None if args.optics is None else optics_file(args.optics), fallback=cal.optics)
     cfg = cfg.replace_reconstruction(method="tv")
     if args.medium_index is not None:
         cfg = cfg.replace(optics=cfg.optics.replace(medium_index=args.medium_index).to_dict())

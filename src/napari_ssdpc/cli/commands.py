@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from napari_ssdpc.cli.follow import follow_recording, followed, report_series
-from napari_ssdpc.cli.options import config_from_args
+from napari_ssdpc.cli.options import config_from_args, optics_file, outputs_from_args
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.paths import check_outputs, is_ours, writable_folder
 from napari_ssdpc.settings.outputs import QUANTITIES
@@ -37,12 +37,6 @@ __all__ = [
 PHANTOMS = ("bead", "two-beads", "cell", "bars", "moving")
 
 
-def _optics(path):
-    from napari_ssdpc.settings.optics import Optics
-
-    return Optics.paper() if path is None else Optics.from_yaml(path)
-
-
 def cmd_design(args):
     """Print the design calculator's table (or JSON) for the optics.
 
@@ -53,7 +47,7 @@ def cmd_design(args):
     """
     from napari_ssdpc.physics.design import design, design_table
 
-    optics = _optics(args.optics)
+    optics = optics_file(args.optics)
     print(json.dumps(design(optics), indent=2) if args.json else design_table(optics))
 
 
@@ -76,7 +70,7 @@ def cmd_calibrate(args):
         overwrite=args.overwrite,
         replaceable=lambda p: is_ours(p) or (p.suffix == ".png" and _is_calibration(out)),  # older overlays: unstamped
     )
-    optics = _optics(args.optics)
+    optics = optics_file(args.optics)
     frame = read_frame(args.frame, allow_series=False, name="white frame")
     cal = calibrate(frame, optics, axis=args.axis)
     overlay_png(frame, cal, png)  # the overlay first: a failure leaves no new JSON without its overlay
@@ -184,7 +178,7 @@ def cmd_simulate(args):
 
     wanted = {"frame": args.output, "flat frame": args.flat, "white frame": args.white}
     outs = check_outputs({k: v for k, v in wanted.items() if v}, {"optics file": args.optics}, overwrite=args.overwrite)
-    optics = _optics(args.optics)
+    optics = optics_file(args.optics)
     _check_simulate_numbers(args, optics)
     given = optics.medium_index
     phantom, optics = make_phantom(args.phantom, optics, n_frames=args.frames)
@@ -247,7 +241,6 @@ def cmd_reconstruct(args):
     from napari_ssdpc.pipeline.run import Pipeline
     from napari_ssdpc.pipeline.sinks import OmeTiffSink, ZarrSink
     from napari_ssdpc.progress import tqdm_callback
-    from napari_ssdpc.settings.outputs import parse_save
 
     out = Path(args.output)
     is_zarr = out.suffix == ".zarr"
@@ -258,8 +251,8 @@ def cmd_reconstruct(args):
         "optics file": args.optics,
         "settings file": args.config,
     }
-    save = parse_save(args.save)  # the paths first: --save may add files beside the output
-    paths = output_paths(out, ["ri", *save])
+    # the paths first: --save or the config's outputs may add files beside the output
+    paths = output_paths(out, ["ri", *outputs_from_args(args).save])
     check_outputs(
         {("output" if n == "ri" else f"{n} output"): p for n, p in paths.items()},
         inputs,
@@ -279,7 +272,7 @@ def cmd_reconstruct(args):
     if follow and not (math.isfinite(args.idle) and args.idle > 0):
         raise SsdpcError(f"--idle must be a positive number of seconds, got {args.idle}")
     cal = Calibration.from_json(args.calibration)
-    cfg = config_from_args(args, None if args.optics is None else _optics(args.optics), fallback=cal.optics)
+    cfg = config_from_args(args, None if args.optics is None else optics_file(args.optics), fallback=cal.optics)
     if follow:
         source = followed(args.raw, args.idle)
     else:
@@ -360,4 +353,4 @@ def cmd_demo(args):
         writable_folder(out, "demo folder")
         names = DEMO_FILES + (REFINE_FILES if args.refine else ())
         check_outputs({name: out / name for name in names}, {"optics file": args.optics}, overwrite=args.overwrite)
-    run_demo(out, optics=None if args.optics is None else _optics(args.optics), seed=args.seed, refine=args.refine)
+    run_demo(out, optics=None if args.optics is None else optics_file(args.optics), seed=args.seed, refine=args.refine)

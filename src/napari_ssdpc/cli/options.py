@@ -137,6 +137,20 @@ def add_reconstruction_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def optics_file(path) -> Optics:
+    """The optics of an ``--optics`` YAML file; the paper's where none is given.
+
+    Parameters
+    ----------
+    path : str or Path or None
+
+    Returns
+    -------
+    Optics
+    """
+    return Optics.paper() if path is None else Optics.from_yaml(path)
+
+
 def config_from_args(args: argparse.Namespace, optics: Optics | None, fallback: Optics | None = None) -> RunConfig:
     """The run configuration: the --config file (or defaults), then the flags given on top.
 
@@ -172,9 +186,27 @@ def config_from_args(args: argparse.Namespace, optics: Optics | None, fallback: 
     if getattr(args, "roi", None) is not None:
         changes.setdefault("multislice", {})["roi_um"] = [float(v) for v in args.roi]
     rec = ReconstructionSettings.from_dict(merge_settings(cfg.reconstruction.to_dict(), changes), source="command line")
-    outputs = cfg.outputs
+    return RunConfig(optics=optics or cfg.optics, reconstruction=rec, outputs=outputs_from_args(args, cfg.outputs))
+
+
+def outputs_from_args(args: argparse.Namespace, outputs: OutputSettings | None = None) -> OutputSettings:
+    """What a run writes: the --config file's ``outputs:`` section, with --save and --store-digits over it.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed arguments with the options of :func:`add_reconstruction_options`.
+    outputs : OutputSettings, optional
+        The config's section when it is already read (else read from --config, or the defaults).
+
+    Returns
+    -------
+    OutputSettings
+    """
+    if outputs is None:
+        outputs = RunConfig.from_yaml(args.config).outputs if getattr(args, "config", None) else OutputSettings()
     changes = {k: getattr(args, k, None) for k in ("save", "store_digits")}
     if any(v is not None for v in changes.values()):
         data = {**outputs.to_dict(), **{k: v for k, v in changes.items() if v is not None}}
         outputs = OutputSettings.from_dict(data, source="command line")
-    return RunConfig(optics=optics or cfg.optics, reconstruction=rec, outputs=outputs)
+    return outputs

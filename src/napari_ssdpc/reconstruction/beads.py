@@ -34,7 +34,9 @@ the fit did not converge or the model does not explain the views there.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -59,8 +61,10 @@ from napari_ssdpc.reconstruction.bead_search import (
     wave_neighbours,
 )
 from napari_ssdpc.reconstruction.dpc import phase_to_delta_n
-from napari_ssdpc.reconstruction.fit_objects import around_bead, bead_candidates
+from napari_ssdpc.reconstruction.fit_objects import around_bead, bead_candidates, voxel_steps
 from napari_ssdpc.reconstruction.nonlinear import discrepancy_stop
+from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.settings.reconstruction import MultisliceSettings
 
 __all__ = ["Bead", "fit_beads", "measure_beads"]
 
@@ -182,9 +186,7 @@ def fit_beads(
             out += job.fit(cands[g])
     except Stopped:
         raise Cancelled("the bead fit was stopped") from None
-    voxel = float(
-        np.prod([abs(a[1] - a[0]) if len(a) > 1 else 1.0 for a in (z_um, measurements.y_um, measurements.x_um)])
-    )
+    voxel = float(np.prod(voxel_steps(z_um, measurements.y_um, measurements.x_um)))
     out = [
         replace(
             b,
@@ -202,16 +204,16 @@ class _GroupFit:
     """The fit of one group of candidates after another, in one region each (the inputs of
     :func:`fit_beads`)."""
 
-    measurements: object
+    measurements: Any
     views: np.ndarray
     noise: float
-    optics: object
-    settings: object
+    optics: Optics
+    settings: MultisliceSettings
     z_search_um: float
     iterations: int
-    backend: object
-    should_stop: object
-    progress: object = None
+    backend: Any
+    should_stop: Callable[[], bool] | None
+    progress: Callable[[int, int, str], None] | None = None
     total: int = 0
     done: int = 0
 

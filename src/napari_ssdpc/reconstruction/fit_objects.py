@@ -9,13 +9,37 @@ import math
 import numpy as np
 from scipy import ndimage
 
-__all__ = ["MIN_VOXELS", "OBJECT_LEVEL", "around_bead", "bead_candidates", "fit_objects", "object_labels"]
+__all__ = [
+    "MIN_VOXELS",
+    "OBJECT_LEVEL",
+    "around_bead",
+    "bead_candidates",
+    "fit_objects",
+    "object_labels",
+    "voxel_steps",
+]
 
 #: A voxel belongs to an object when its |Δn| reaches this fraction of the strongest (a pixel of the
 #: region's objects, when its z-projected |Δn| does).
 OBJECT_LEVEL = 0.15
 #: Fewer voxels than this above the level are not an object of the fit's report.
 MIN_VOXELS = 8
+
+
+def voxel_steps(z_um, y_um, x_um) -> tuple[float, float, float]:
+    """A grid's voxel size (dz, dy, dx), µm (dz 1 for a single plane: the volume is per µm of depth).
+
+    Parameters
+    ----------
+    z_um, y_um, x_um : array_like
+        The grid's planes and pixel centres, µm, evenly spaced.
+
+    Returns
+    -------
+    tuple of float
+    """
+    dz, dy, dx = (float(abs(a[1] - a[0])) if len(a) > 1 else 1.0 for a in (z_um, y_um, x_um))
+    return dz, dy, dx
 
 
 def object_labels(dn) -> np.ndarray:
@@ -71,7 +95,7 @@ def fit_objects(dn, misfit_map, z_um, y_um, x_um, *, noise: float, alpha_um3_pg:
     """
     dn = np.asarray(dn, float)
     z, y, x = (np.asarray(c, float) for c in (z_um, y_um, x_um))
-    voxel = (abs(z[1] - z[0]) if len(z) > 1 else 1.0, abs(y[1] - y[0]), abs(x[1] - x[0]))
+    voxel = voxel_steps(z, y, x)
     a = np.abs(dn)
     labels = object_labels(dn)
     if not labels.any():
@@ -115,7 +139,7 @@ def bead_candidates(dn, z_um, y_um, x_um) -> np.ndarray:
     dn = np.asarray(dn, float)
     labels = object_labels(dn)
     z, y, x = (np.asarray(a, float) for a in (z_um, y_um, x_um))
-    voxel = (abs(z[1] - z[0]) if len(z) > 1 else 1.0) * abs(y[1] - y[0]) * abs(x[1] - x[0])
+    voxel = float(np.prod(voxel_steps(z, y, x)))
     rows = []
     for c, sl in enumerate(ndimage.find_objects(labels), start=1):
         if sl is None:
