@@ -58,7 +58,7 @@ def job(synthetic_series):
 
 def test_live_frames_are_followed_as_they_arrive_until_the_source_closes(job):
     shape = tuple(job.calibration.frame_shape)
-    live, rec, sink = LiveFrames(shape), CountingRec(), MemorySink()
+    live, rec, sink = LiveFrames(shape, maxsize=None), CountingRec(), MemorySink()
     assert isinstance(live, FrameSource) and as_source(live) is live
     arrivals = []
 
@@ -81,6 +81,40 @@ def test_live_frames_are_followed_as_they_arrive_until_the_source_closes(job):
         live.push(np.zeros(shape, np.uint16))
     with pytest.raises(SsdpcError, match="a frame of shape"):
         LiveFrames(shape).push(np.zeros((4, 4)))
+
+
+class SlowRec(CountingRec):
+    """A solver that takes 20 ms a frame."""
+
+    def reconstruct(self, frame, **kw):
+        time.sleep(0.02)
+        return super().reconstruct(frame, **kw)
+
+
+def test_a_lagging_solver_drops_the_oldest_waiting_frames_and_memory_stays_bounded(job):
+    shape = tuple(job.calibration.frame_shape)
+    live, rec, sink = LiveFrames(shape, maxsize=2), SlowRec(), MemorySink()
+    held = []
+
+    def camera():  # 60 frames 1 ms apart: far faster than the solver
+        for k in range(60):
+            live.push(np.full(shape, k + 1, np.uint16))
+            held.append(live.held())
+            time.sleep(0.001)
+        live.close()
+
+    writer = threading.Thread(target=camera)
+    writer.start()
+    report = Pipeline(job, reconstructor=rec).run(live, sink, progress=False)
+    writer.join()
+    assert max(held) <= 3  # two waiting and the one being solved, however many frames came
+    assert report.written + len(report.dropped) == 60 and len(report.dropped) > 30
+    kept = sorted(sink.frames)
+    assert set(kept).isdisjoint(report.dropped) and 59 in kept  # the newest frame is never dropped
+    assert rec.seen == [t + 1.0 for t in kept]  # each kept frame once, in order
+    assert live.held() <= 1
+    with pytest.raises(SsdpcError, match="maxsize"):
+        LiveFrames(shape, maxsize=0)
 
 
 def test_a_stop_ends_the_wait_for_the_next_live_frame(job):

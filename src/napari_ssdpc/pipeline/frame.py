@@ -31,6 +31,8 @@ class RunReport:
         Time to build the operators, s.
     timings : list of dict
         Per frame, as :func:`process_frame` returns them.
+    dropped : list of int
+        Frames a bounded live source dropped while the solver lagged (their camera indices).
     """
 
     frames: int
@@ -39,6 +41,7 @@ class RunReport:
     seconds: float
     build_seconds: float
     timings: list = field(default_factory=list)
+    dropped: list = field(default_factory=list)
 
     @property
     def frames_per_second(self) -> float:

@@ -132,6 +132,8 @@ class Pipeline:
         show = progress if progress is not None else (total is None or total > 1)
         bar = frame_bar(total, len(done), show)
         t0, timings, warm, t = time.perf_counter(), [], None, 0
+        # a bounded live source may drop a frame the solver has not come to: claim it first
+        claim = getattr(source, "claim", lambda t: True)
         limit = float("inf") if stop_after is None else int(stop_after)
         try:
             while len(timings) < limit:
@@ -142,7 +144,9 @@ class Pipeline:
                         break
                     source.wait(POLL_S)
                     continue
-                if t not in done:
+                if t in done:
+                    warm = None  # the next frame's neighbour was solved by another run
+                elif claim(t):
                     timing, result = process_frame(
                         rec,
                         source,
@@ -157,10 +161,10 @@ class Pipeline:
                     bar.update(1)
                     if on_frame is not None:
                         on_frame(t, len(done) + len(timings), total, result)
-                else:
-                    warm = None  # the next frame's neighbour was solved by another run
+                # else dropped by a bounded live source: the next frame starts from the last one solved
                 t += 1
         finally:
             bar.close()
         frames = source.available()
-        return RunReport(frames, len(timings), len(done), time.perf_counter() - t0, rec.build_seconds, timings)
+        dropped = list(source.dropped()) if hasattr(source, "dropped") else []
+        return RunReport(frames, len(timings), len(done), time.perf_counter() - t0, rec.build_seconds, timings, dropped)

@@ -72,7 +72,12 @@ def as_source(frames) -> FrameSource:
 
 
 class LiveFrames:
-    """Frames that arrive one by one (a camera, a writer thread) until :meth:`close`.
+    """Frames that arrive one by one (a camera, a writer thread) until :meth:`close`, in a bounded queue.
+
+    The frames wait for the loop in a queue of at most ``maxsize``: when the solver lags, the oldest
+    waiting frame is dropped (and counted: :meth:`dropped`), so the memory held stays that of
+    ``maxsize`` + 1 frames however long the run, and :meth:`push` never blocks the camera. A frame
+    is released once the loop asks for a later one.
 
     Parameters
     ----------
@@ -80,18 +85,27 @@ class LiveFrames:
         (H, W) of every frame, px.
     name : str
         For messages.
+    maxsize : int or None
+        Most frames waiting (≥ 1); None keeps every frame (a recording that must be complete).
 
     Examples
     --------
     >>> live = LiveFrames((512, 512))               # doctest: +SKIP
     >>> camera.on_frame(live.push)                   # each new frame enters the loop
-    >>> pipeline.run(live, sink)                     # returns after live.close()
+    >>> report = pipeline.run(live, sink)            # returns after live.close()
+    >>> report.dropped                               # the frames the solver could not keep up with
     """
 
-    def __init__(self, frame_shape, name: str = "live frames"):
+    def __init__(self, frame_shape, name: str = "live frames", maxsize: int | None = 2):
+        if maxsize is not None and not (isinstance(maxsize, int) and maxsize >= 1):
+            raise SsdpcError(f"{name}: maxsize = {maxsize!r}; give a number of frames >= 1, or None to keep all")
         self._shape = (int(frame_shape[0]), int(frame_shape[1]))
         self._name = name
-        self._frames: list[np.ndarray] = []
+        self._maxsize = maxsize
+        self._frames: dict[int, np.ndarray] = {}
+        self._count = 0
+        self._claimed = -1
+        self._dropped: list[int] = []
         self._closed = False
         self._added = threading.Condition()
 
@@ -106,7 +120,7 @@ class LiveFrames:
         return self._shape
 
     def push(self, frame) -> int:
-        """Add a frame; returns its index.
+        """Add a frame (dropping the oldest waiting one when the queue is full); returns its index.
 
         Parameters
         ----------
@@ -123,9 +137,16 @@ class LiveFrames:
         with self._added:
             if self._closed:
                 raise SsdpcError(f"{self._name} is closed: no frame can be added")
-            self._frames.append(a)
+            t = self._count
+            self._frames[t] = a
+            self._count += 1
+            if self._maxsize is not None:
+                waiting = sorted(k for k in self._frames if k > self._claimed)
+                for k in waiting[: max(len(waiting) - self._maxsize, 0)]:
+                    del self._frames[k]
+                    self._dropped.append(k)
             self._added.notify_all()
-            return len(self._frames) - 1
+            return t
 
     def close(self) -> None:
         """No more frames: the loop ends after the ones pushed."""
@@ -134,12 +155,39 @@ class LiveFrames:
             self._added.notify_all()
 
     def available(self) -> int:
-        """Frames pushed so far."""
-        return len(self._frames)
+        """Frames pushed so far (dropped ones included: indices are the camera's)."""
+        return self._count
 
     def finished(self) -> bool:
         """Closed."""
         return self._closed
+
+    def claim(self, t: int) -> bool:
+        """Keep frame ``t`` for the loop (it can no longer be dropped) and release the earlier ones.
+
+        Parameters
+        ----------
+        t : int
+
+        Returns
+        -------
+        bool
+            False when frame ``t`` was dropped before the loop came to it.
+        """
+        with self._added:
+            for k in [k for k in self._frames if k < t]:
+                del self._frames[k]
+            self._claimed = max(self._claimed, int(t))
+            return int(t) in self._frames
+
+    def dropped(self) -> list[int]:
+        """Indices of the frames dropped so far, in order."""
+        with self._added:
+            return sorted(self._dropped)
+
+    def held(self) -> int:
+        """Frames in memory now."""
+        return len(self._frames)
 
     def wait(self, timeout_s: float) -> None:
         """Block until a frame is pushed, the source is closed, or ``timeout_s`` passed.
@@ -150,11 +198,14 @@ class LiveFrames:
             Longest wait, s.
         """
         with self._added:
-            n = len(self._frames)
-            self._added.wait_for(lambda: self._closed or len(self._frames) > n, timeout=timeout_s)
+            n = self._count
+            self._added.wait_for(lambda: self._closed or self._count > n, timeout=timeout_s)
 
     def __getitem__(self, t: int) -> np.ndarray:
-        return self._frames[int(t)]
+        with self._added:
+            if int(t) not in self._frames:
+                raise SsdpcError(f"{self._name}: frame {t} was dropped (the queue holds {self._maxsize})")
+            return self._frames[int(t)]
 
     def identity(self) -> dict:
         """A live source is not a recording: it cannot be resumed."""
