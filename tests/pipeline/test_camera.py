@@ -1,0 +1,101 @@
+"""Frames from a Micro-Manager core (pymmcore-plus's pure-Python camera, no hardware): every frame
+of an acquisition into the loop, the acquisition never held back, dropped frames counted."""
+
+import time
+
+import numpy as np
+import pytest
+
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.pipeline.run import Pipeline
+from napari_ssdpc.pipeline.sinks import MemorySink
+
+unicore = pytest.importorskip("pymmcore_plus.experimental.unicore", reason="pymmcore-plus is not installed")
+useq = pytest.importorskip("useq", reason="useq-schema (with pymmcore-plus) is not installed")
+
+from napari_ssdpc.pipeline.camera import CoreFrames  # noqa: E402
+
+from .test_frame_loop import CountingRec, job  # noqa: E402, F401
+
+
+class SimulatedCamera(unicore.SimpleCameraDevice):
+    """Serves the given frames in turn, one every 15 ms (a 67 Hz camera; the paper records at 74 Hz)."""
+
+    def __init__(self, frames):
+        super().__init__()
+        self.frames, self.k, self.exposure = frames, 0, 10.0
+
+    def sensor_shape(self):
+        return self.frames.shape[1:]
+
+    def dtype(self):
+        return self.frames.dtype
+
+    def get_exposure(self):
+        return self.exposure
+
+    def set_exposure(self, value):
+        self.exposure = value
+
+    def snap(self, buffer):
+        time.sleep(0.015)
+        buffer[:] = self.frames[self.k % len(self.frames)]
+        self.k += 1
+        return {}
+
+
+class SlowRec(CountingRec):
+    """A solver that takes 60 ms a frame (4 x the camera's period)."""
+
+    def reconstruct(self, frame, **kw):
+        time.sleep(0.06)
+        return super().reconstruct(frame, **kw)
+
+
+def core_with(frames):
+    core = unicore.UniMMCore()
+    core.loadPyDevice("Camera", SimulatedCamera(frames))
+    core.initializeDevice("Camera")
+    core.setCameraDevice("Camera")
+    core.setCircularBufferMemoryFootprint(1024)  # MB: the core never loses a frame of these tests
+    return core
+
+
+def series(shape, n):
+    return np.stack([np.full(shape, k + 1, np.uint16) for k in range(n)])
+
+
+def test_every_frame_of_an_acquisition_on_the_core_is_reconstructed(job):  # noqa: F811
+    shape = tuple(job.calibration.frame_shape)
+    core = core_with(series(shape, 6))
+    frames, rec, sink = CoreFrames(core, maxsize=None), CountingRec(), MemorySink()
+    acquisition = core.run_mda(useq.MDASequence(time_plan={"interval": 0, "loops": 6}))  # started elsewhere
+    report = Pipeline(job, reconstructor=rec).run(frames, sink, progress=False)
+    acquisition.join()
+    assert report.written == 6 and report.dropped == [] and rec.seen == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
+    assert frames.finished()  # ended by the acquisition's end, not by a timeout
+
+
+def test_a_lagging_solver_never_holds_the_acquisition_back(job):  # noqa: F811
+    shape = tuple(job.calibration.frame_shape)
+    core = core_with(series(shape, 40))
+    frames, rec, sink = CoreFrames(core, maxsize=2), SlowRec(), MemorySink()
+    acquisition = core.run_mda(useq.MDASequence(time_plan={"interval": 0, "loops": 40}))
+    report = Pipeline(job, reconstructor=rec).run(frames, sink, progress=False)
+    acquisition.join()
+    # the solver takes 60 ms a frame, the camera 15 ms: the oldest waiting frames are dropped, and
+    # every frame the camera made reached the source (the acquisition ran to its end)
+    assert report.frames == 40 and report.written + len(report.dropped) == 40 and report.dropped
+    assert 40.0 in rec.seen and rec.seen == sorted(rec.seen)  # the last frame kept, the order kept
+    assert frames.held() <= 1
+
+
+def test_a_core_without_a_camera_or_a_frame_of_another_shape_is_one_line(job):  # noqa: F811
+    with pytest.raises(SsdpcError, match="load and set a camera device"):
+        CoreFrames(unicore.UniMMCore())
+    shape = tuple(job.calibration.frame_shape)
+    core = core_with(series(shape, 2))
+    frames = CoreFrames(core)
+    frames._on_frame(np.zeros((4, 4), np.uint16))
+    with pytest.raises(SsdpcError, match="keep the camera ROI and binning fixed"):
+        Pipeline(job, reconstructor=CountingRec()).run(frames, MemorySink(), progress=False)
