@@ -66,3 +66,25 @@ def test_store_digits_belongs_to_a_store(stores, tmp_path, capsys):
     assert main(base + ["--store-digits", "0", "-o", str(tmp_path / "s.zarr")]) == 2
     err = capsys.readouterr().err
     assert "store_digits" in err and err.count("\n") == 1
+
+
+def test_digits_that_cannot_hold_the_samples_delta_n_to_one_percent_warn(stores, tmp_path):
+    import math
+    import warnings
+
+    from napari_ssdpc.errors import SsdpcWarning
+
+    out, frames, (optics, cal, flat) = stores
+    peak = float(np.nanmax(np.abs(read_ome_zarr(out[None], "ri")[0][:1] - optics.medium_index)))
+    need = math.ceil(-math.log10(0.01 * peak))
+    config = run_config(optics, **SETTINGS)
+
+    def run(digits, name):
+        cfg = RunConfig(optics=config.optics, reconstruction=config.reconstruction, outputs={"store_digits": digits})
+        Pipeline(Job(cfg, cal, flat)).run(frames[:2], ZarrSink(tmp_path / name), progress=False)
+
+    with pytest.warns(SsdpcWarning, match=f"--store-digits {need - 1} keeps values to .* use --store-digits {need}"):
+        run(need - 1, "coarse.zarr")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SsdpcWarning)
+        run(need, "fine.zarr")

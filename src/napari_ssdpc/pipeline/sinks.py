@@ -8,7 +8,9 @@ after an error. Storage itself (the files' formats, the store's stamp and lock) 
 
 from __future__ import annotations
 
+import math
 import os
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.io.frames import write_ome_tiffs
 from napari_ssdpc.io.store import grow_store, open_store, write_frame
 from napari_ssdpc.io.store_lock import StoreLock
@@ -224,6 +226,8 @@ class ZarrSink(Sink):
         self.meta = dict(meta or {})
         self._lock: StoreLock | None = None
         self._length = 0
+        self._digits: int | None = None
+        self._digits_checked = False
         if not self.out.parent.is_dir():
             raise SsdpcError(f"output folder does not exist: {self.out.parent} (create it first)")
         if self.out.exists() and not self.out.is_dir():
@@ -246,7 +250,7 @@ class ZarrSink(Sink):
         }
         self._lock = StoreLock(self.out).__enter__()  # one writer per store
         attrs = {**self.meta, "settings": grid.settings}
-        digits = job.config.outputs.store_digits
+        digits = self._digits = job.config.outputs.store_digits
         try:
             done = open_store(self.out, n, layout, grid.voxel_um, stamp, attrs, grid.origin_um, digits)
         except BaseException:  # refused or failed: the store is not written, the lock not kept
@@ -256,6 +260,9 @@ class ZarrSink(Sink):
         return set(np.flatnonzero(done[:] == 1).tolist())
 
     def _write(self, t, result) -> float:
+        if self._digits is not None and not self._digits_checked:
+            self._digits_checked = True
+            _check_digits(self._digits, result.delta_n)
         if t >= self._length:  # a followed recording grew
             grow_store(self.out, t + 1)
             self._length = t + 1
@@ -265,3 +272,26 @@ class ZarrSink(Sink):
         if self._lock is not None:
             self._lock.__exit__(None, None, None)
             self._lock = None
+
+
+def _check_digits(digits: int, delta_n) -> None:
+    """Warn (once a run, on its first frame) when a store's digits cannot hold the sample's Δn to 1 %.
+
+    Parameters
+    ----------
+    digits : int
+        Decimal digits the store keeps of every value (errors up to 10^-digits).
+    delta_n : ndarray
+        The first frame's Δn.
+    """
+    peak = float(np.nanmax(np.abs(delta_n))) if np.size(delta_n) else 0.0
+    step = 10.0**-digits
+    if peak > 0 and step > 0.01 * peak:
+        need = math.ceil(-math.log10(0.01 * peak))
+        warnings.warn(
+            f"--store-digits {digits} keeps values to {step:g}, {100 * step / peak:.0f} % of this sample's peak "
+            f"|Δn| {peak:.2g}: its Δn is stored with errors that large; use --store-digits {need} or more, or "
+            "leave it out (float32)",
+            SsdpcWarning,
+            stacklevel=2,
+        )
