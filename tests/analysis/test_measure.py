@@ -156,6 +156,13 @@ def _damage(store, how):
     attrs = dict(g.attrs)
     ms = attrs["multiscales"][0]
     scale = ms["datasets"][0]["coordinateTransformations"][0]
+    if how in ("voxel-inf", "ri-plus-5"):  # values no sample has: one infinite voxel, every RI + 5
+        a = g["0"]
+        if how == "voxel-inf":
+            a[0, 0, 0, 0] = np.inf
+        else:
+            a[0] = a[0] + 5.0
+        return
     if how == "chunk":  # a frame's chunk overwritten with junk
         (next(p for p in (store / "ri" / "0").rglob("*") if p.is_file() and not p.name.startswith("."))).write_bytes(
             b"junk"
@@ -193,6 +200,8 @@ def _damage(store, how):
         "medium-text",
         "alpha-negative",
         "chunk",
+        "voxel-inf",
+        "ri-plus-5",
     ],
 )
 def test_a_damaged_store_is_one_line_and_writes_nothing(store, tmp_path, capsys, how):
@@ -203,4 +212,5 @@ def test_a_damaged_store_is_one_line_and_writes_nothing(store, tmp_path, capsys,
     _damage(damaged, how)
     line = _one_line(capsys, ["measure", damaged])
     assert str(damaged) in line or "refraction increment" in line
+    assert {"voxel-inf": "not finite", "ri-plus-5": "outside any sample's"}.get(how, "") in line
     assert not csv_path(damaged).exists()

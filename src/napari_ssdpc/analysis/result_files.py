@@ -24,6 +24,9 @@ __all__ = ["StoredResult", "open_result"]
 _HOW = "give an OME-TIFF or OME-Zarr result written by `ssdpc reconstruct`"
 
 
+#: Refractive indices a sample or medium can have (air to the densest glasses and crystals).
+RI_RANGE = (1.0, 2.5)
+
 @dataclass
 class StoredResult:
     """A reconstruction on disk, read one frame at a time.
@@ -72,6 +75,19 @@ class StoredResult:
                 f"{self.path}: frame {t} cannot be read ({type(e).__name__}); the file is damaged"
             ) from None
         vol = vol.reshape(len(self.z_um), len(self.y_um), len(self.x_um))
+        bad = int(np.count_nonzero(~np.isfinite(vol)))
+        if bad:
+            raise SsdpcError(
+                f"{self.path}: frame {t} holds {bad} voxel(s) that are not finite numbers; the file is damaged: "
+                "reconstruct that frame again"
+            )
+        ri = vol if self._is_ri else vol + np.float32(self.n_medium)
+        lo, hi = float(ri.min()), float(ri.max())
+        if lo < RI_RANGE[0] or hi > RI_RANGE[1]:
+            raise SsdpcError(
+                f"{self.path}: frame {t} holds refractive indices from {lo:.4g} to {hi:.4g}, outside any sample's "
+                f"({RI_RANGE[0]}-{RI_RANGE[1]}); the file is damaged or not an RI volume of ours"
+            )
         return vol - np.float32(self.n_medium) if self._is_ri else vol
 
     def __iter__(self) -> Iterator[tuple[int, np.ndarray]]:
@@ -111,7 +127,7 @@ def _damaged(opener):
         for name, c in (("z", stored.z_um), ("y", stored.y_um), ("x", stored.x_um)):
             if not np.all(np.isfinite(c)) or (len(c) > 1 and not np.all(np.diff(c) > 0)):
                 raise SsdpcError(f"{path}: its {name} coordinates are not finite and increasing; {_HOW}")
-        if not (np.isfinite(stored.n_medium) and 1.0 <= stored.n_medium <= 2.5):
+        if not (np.isfinite(stored.n_medium) and RI_RANGE[0] <= stored.n_medium <= RI_RANGE[1]):
             raise SsdpcError(f"{path}: the medium's index {stored.n_medium} is not one of a medium; {_HOW}")
         return stored
 
