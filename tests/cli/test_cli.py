@@ -108,3 +108,24 @@ def test_a_bead_line_gives_its_numbers_and_its_check():
     )
     flagged = Bead((0.0, 0.0, -10.2), 4.96, 1.56, 0.227, 30.2, 4.6, True, False, "the model leaves 30.2 x the noise")
     assert bead_line(2, flagged).endswith("x the noise; CHECK: the model leaves 30.2 x the noise")
+
+
+def test_ctrl_c_while_the_command_loads_is_one_line(monkeypatch, capsys):
+    """The console entry loads the command (about a second of imports) inside the Ctrl-C guard."""
+    import sys
+
+    import napari_ssdpc.cli.main  # noqa: F401  (loaded, so that it can be taken away and put back)
+    from napari_ssdpc.cli import entry
+
+    class Interrupted:
+        """An import hit by Ctrl-C."""
+
+        def find_spec(self, name, path=None, target=None):
+            if name == "napari_ssdpc.cli.main":
+                raise KeyboardInterrupt
+            return None
+
+    monkeypatch.delitem(sys.modules, "napari_ssdpc.cli.main")
+    monkeypatch.setattr(sys, "meta_path", [Interrupted(), *sys.meta_path])
+    assert entry.run(["design"]) == 130
+    assert capsys.readouterr().err == "ssdpc: interrupted\n"

@@ -27,6 +27,7 @@ _HOW = "give an OME-TIFF or OME-Zarr result written by `ssdpc reconstruct`"
 #: Refractive indices a sample or medium can have (air to the densest glasses and crystals).
 RI_RANGE = (1.0, 2.5)
 
+
 @dataclass
 class StoredResult:
     """A reconstruction on disk, read one frame at a time.

@@ -1,5 +1,4 @@
-"""The ssdpc command."""
+"""The ssdpc command: :func:`napari_ssdpc.cli.main.main`, entered through
+:func:`napari_ssdpc.cli.entry.run` (which loads it inside the Ctrl-C guard)."""
 
-from napari_ssdpc.cli.main import main
-
-__all__ = ["main"]
+__all__: list[str] = []
