@@ -1,4 +1,6 @@
-"""The ssdpc command: :func:`napari_ssdpc.cli.main.main`, entered through
-:func:`napari_ssdpc.cli.entry.run` (which loads it inside the Ctrl-C guard)."""
+"""The ssdpc command: :func:`napari_ssdpc.cli.main.main`, entered through :func:`run` (which loads
+it inside the Ctrl-C guard)."""
 
-__all__: list[str] = []
+from napari_ssdpc.cli.entry import run
+
+__all__ = ["run"]
