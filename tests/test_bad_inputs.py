@@ -151,6 +151,7 @@ _OPTION_CASES = {
     "scheduler-empty": (["--scheduler", ""], "Dask scheduler"),
     "workers-zero": (["--workers", "0"], "workers"),
     "workers-negative": (["--workers", "-2"], "workers"),
+    "workers-beyond-the-cores": (["--workers", "100000"], "cores"),
 }
 
 

@@ -8,6 +8,7 @@ unknown length (:class:`~.sources.LiveFrames`) is followed until it is finished.
 
 from __future__ import annotations
 
+import os
 import re
 import time
 
@@ -49,6 +50,12 @@ class Pipeline:
             raise SsdpcError(f"Pipeline takes a Job (configuration, calibration, flat), got {type(job).__name__}")
         if workers is not None and workers < 1:
             raise SsdpcError(f"--workers must be >= 1, got {workers}")
+        cores = os.cpu_count() or 1
+        if workers is not None and scheduler is None and workers > cores:
+            raise SsdpcError(
+                f"--workers {workers}: this machine has {cores} cores, and each worker builds its own operators; "
+                f"give at most {cores}, or --scheduler for a cluster"
+            )
         if scheduler is not None and not _SCHEDULER.fullmatch(str(scheduler)):
             raise SsdpcError(
                 f"Dask scheduler address {scheduler!r}: give it as tcp://host:port (e.g. tcp://10.0.0.5:8786)"
