@@ -153,3 +153,41 @@ def test_follow_refuses_what_it_cannot_do(data, tmp_path, capsys):
     (tmp_path / "empty").mkdir()
     with pytest.raises(SsdpcError, match="no complete frame arrived within 0.3 s"):
         FollowedFrames(tmp_path / "empty", idle_s=0.3)
+
+
+def test_a_tiff_rewritten_during_the_run_is_never_mixed_in(data, tmp_path):
+    """A new recording written over the followed TIFF from its start: with more frames the first
+    read after it stops the run (frame 0 changed), with fewer the next look does (it shrank)."""
+    _, frames = data
+    raw = tmp_path / "rec.tif"
+    tifffile.imwrite(raw, frames[:3], photometric="minisblack")
+    src = FollowedFrames(raw, idle_s=5.0, settle_s=0.0)
+    assert src.available() == 3 and all(np.array_equal(src[t], frames[t]) for t in range(3))
+    tifffile.imwrite(raw, frames[5:9], photometric="minisblack")  # another recording, longer
+    assert src.available() == 4
+    with pytest.raises(SsdpcError, match="frame 0 changed while frame 3 was read: another recording"):
+        src[3]
+    tifffile.imwrite(raw, frames[:3], photometric="minisblack")
+    src = FollowedFrames(raw, idle_s=5.0, settle_s=0.0)
+    assert src.available() == 3
+    tifffile.imwrite(raw, frames[5:6], photometric="minisblack")  # another recording, shorter
+    with pytest.raises(SsdpcError, match="shrank from 3 to 1 frames"):
+        src.available()
+
+
+def test_a_folder_whose_files_change_places_stops_instead_of_shifting_frames(data, tmp_path):
+    _, frames = data
+    for k in (0, 2):
+        tifffile.imwrite(tmp_path / f"img_{k:04d}.tif", frames[k])
+    with pytest.warns(SsdpcWarning, match="file number 1 is missing"):
+        src = FollowedFrames(tmp_path, idle_s=5.0, settle_s=0.0)
+    assert src.available() == 2
+    tifffile.imwrite(tmp_path / "img_0001.tif", frames[1])  # arrives late, with a lower number
+    with pytest.raises(SsdpcError, match="frame 1 was img_0002.tif and is now img_0001.tif"):
+        src.available()
+    (tmp_path / "img_0001.tif").unlink()
+    src = FollowedFrames(tmp_path, idle_s=5.0, settle_s=0.0)
+    assert src.available() == 2
+    (tmp_path / "img_0000.tif").unlink()  # deleted
+    with pytest.raises(SsdpcError, match="shrank from 2 to 1 frames"):
+        src.available()

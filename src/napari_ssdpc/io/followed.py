@@ -90,6 +90,9 @@ class FollowedFrames:
         self._signature, self._changed = None, time.monotonic()
         self._pages = 0  # complete pages of a TIFF at its last signature
         self._last_arrival = time.monotonic()
+        self._names: list[str] = []  # a folder's file of each frame that has arrived
+        self._first_hash: str | None = None
+        self._verified = None  # the signature at which frame 0 was last found unchanged
         wait_s = self.idle_s if first_wait_s is None else float(first_wait_s)
         deadline = time.monotonic() + wait_s
         while self._scan() == 0:
@@ -103,7 +106,8 @@ class FollowedFrames:
         if first.ndim != 2:
             raise SsdpcError(f"{self.path}: frame 0 has shape {first.shape}; expected one 2D frame per page or file")
         self._shape, self._dtype = tuple(int(v) for v in first.shape), first.dtype
-        self._first_hash = hashlib.sha256(np.ascontiguousarray(first).tobytes()).hexdigest()
+        self._first_hash = _hash(first)
+        self._verified = self._signature
 
     # ---------------------------------------------------------------- the protocol
     @property
@@ -152,6 +156,8 @@ class FollowedFrames:
             raise IndexError(f"frame {t} of {self._ready} arrived")
         try:
             frame = self._read(t)
+            if t > 0:
+                self._verify(t)
         except SsdpcError:
             raise
         except Exception as e:  # a writer between its steps, a damaged page
@@ -160,16 +166,36 @@ class FollowedFrames:
             ) from None
         return np.array(frame, copy=True)
 
+    def _verify(self, t: int) -> None:
+        """Frame 0 is still the one the run started with (checked once per change of the recording,
+        after frame ``t`` was read): a recording rewritten at the same path is never mixed in."""
+        signature = self._signature
+        if self._first_hash is None or signature == self._verified:
+            return
+        if _hash(self._read(0)) != self._first_hash:
+            raise SsdpcError(
+                f"{self.path}: frame 0 changed while frame {t} was read: another recording is being written at "
+                "this path; the frames before it are kept; follow the new recording into a new output"
+            )
+        self._verified = signature
+
     # ---------------------------------------------------------------- the recording
     def _scan(self) -> int:
         """Count the frames present, and how many of them have arrived completely."""
         with self._lock:
             count, signature = self._look()
+            if count < self._count:
+                raise SsdpcError(
+                    f"{self.path}: the recording shrank from {self._count} to {count} frames during the run "
+                    "(rewritten or truncated); the frames before are kept; follow the new recording into a new output"
+                )
             now = time.monotonic()
             if signature != self._signature:
                 self._signature, self._changed = signature, now
             settled = now - self._changed >= self.settle_s
             ready = count if settled else max(count - 1, 0)
+            if self.kind == "folder":
+                self._keep_order(ready)
             if ready > self._ready:
                 stamp = time.time()
                 for t in range(self._ready, ready):
@@ -184,7 +210,10 @@ class FollowedFrames:
             st = self.path.stat()
             signature = (st.st_size, st.st_mtime_ns)
             if signature != self._signature:  # the pages are parsed again only when the file changed
-                self._pages = self._tiff_pages(st.st_size)
+                pages = self._tiff_pages(st.st_size)
+                if pages is None:  # a header being written: nothing new readable yet
+                    return self._pages, self._signature
+                self._pages = pages
             return self._pages, signature
         if self.kind == "zarr":
             array = self._zarr()
@@ -198,15 +227,15 @@ class FollowedFrames:
         last = files[-1].stat() if files else None
         return len(files), (len(files), None if last is None else (last.st_size, last.st_mtime_ns))
 
-    def _tiff_pages(self, size: int) -> int:
-        """Pages whose data lie wholly within the file."""
+    def _tiff_pages(self, size: int) -> int | None:
+        """Pages whose data lie wholly within the file; None while it cannot be parsed."""
         import tifffile
 
         try:
             with tifffile.TiffFile(self.path) as tif:
                 return complete_pages(tif.pages, size)
-        except Exception:  # a header being written: nothing readable yet
-            return 0
+        except Exception:  # a header being written
+            return None
 
     def _zarr(self):
         import zarr
@@ -230,6 +259,24 @@ class FollowedFrames:
             return np.asarray(array[t] if array.ndim == 3 else array[...]).squeeze()
         return tifffile.imread(self._files[t])
 
+    def _keep_order(self, ready: int) -> None:
+        """The files of the frames that have arrived keep their places: a file that arrives late with
+        a lower number, or one deleted, would shift every later frame's index."""
+        names = [p.name for p in self._files]
+        for t, (was, now) in enumerate(zip(self._names, names, strict=False)):
+            if was != now:
+                raise SsdpcError(
+                    f"{self.path}: frame {t} was {was} and is now {now} (a file arrived late with a lower "
+                    "number, or one was deleted); the frames before are kept; number the files in the order "
+                    "they are written, and follow into a new output"
+                )
+        if len(names) < len(self._names):
+            raise SsdpcError(
+                f"{self.path}: {self._names[len(names)]} (frame {len(names)}) was deleted during the run; the "
+                "frames before are kept; follow into a new output"
+            )
+        self._names = names[: max(ready, len(self._names))]
+
     def _name_gaps(self, files) -> None:
         """Warn once per gap in a numbered sequence of files (a frame lost by the writer)."""
         numbers = [int(m.group(1)) for p in files if (m := re.search(r"(\d+)(?=\D*$)", p.stem))]
@@ -245,6 +292,11 @@ class FollowedFrames:
                     SsdpcWarning,
                     stacklevel=2,
                 )
+
+
+def _hash(frame) -> str:
+    """SHA-256 of a frame's values."""
+    return hashlib.sha256(np.ascontiguousarray(frame).tobytes()).hexdigest()
 
 
 def _entries(folder: Path):
