@@ -191,3 +191,14 @@ def test_a_folder_whose_files_change_places_stops_instead_of_shifting_frames(dat
     (tmp_path / "img_0000.tif").unlink()  # deleted
     with pytest.raises(SsdpcError, match="shrank from 2 to 1 frames"):
         src.available()
+
+
+def test_a_recording_that_does_not_exist_yet_is_waited_for_within_the_idle_time(data, tmp_path):
+    """The CLI and napari wait alike: for the path to appear, then for its first frame."""
+    _, frames = data
+    raw = tmp_path / "later.tif"
+    threading.Timer(0.5, lambda: tifffile.imwrite(raw, frames[:1], photometric="minisblack")).start()
+    src = FollowedFrames(raw, idle_s=5.0, settle_s=0.0)
+    assert src.available() == 1 and np.array_equal(src[0], frames[0])
+    with pytest.raises(SsdpcError, match="does not exist and did not appear within 0.3 s"):
+        FollowedFrames(tmp_path / "never.tif", idle_s=0.3)

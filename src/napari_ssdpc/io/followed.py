@@ -70,7 +70,7 @@ class FollowedFrames:
     settle_s : float
         The newest frame counts as arrived once the recording has not changed for this long, s.
     first_wait_s : float, optional
-        How long to wait for the first frame, s (default ``idle_s``).
+        How long to wait for the recording and its first frame, s (default ``idle_s``).
     should_stop : callable, optional
         Checked while waiting for the first frame.
 
@@ -82,6 +82,15 @@ class FollowedFrames:
 
     def __init__(self, path, *, idle_s: float = 30.0, settle_s: float = 1.0, first_wait_s=None, should_stop=None):
         self.path = Path(path)
+        wait_s = float(idle_s) if first_wait_s is None else float(first_wait_s)
+        deadline = time.monotonic() + wait_s
+        while not self.path.exists():  # the camera has not started yet: wait for it, as for its frames
+            if time.monotonic() > deadline or (should_stop is not None and should_stop()):
+                raise SsdpcError(
+                    f"{self.path} does not exist and did not appear within {wait_s:g} s; start the recording, "
+                    "or wait longer with --idle SECONDS"
+                )
+            time.sleep(POLL_S)
         self.kind = kind_of_recording(self.path)
         self.idle_s, self.settle_s = float(idle_s), float(settle_s)
         self.arrived_at: dict[int, float] = {}
@@ -93,8 +102,6 @@ class FollowedFrames:
         self._names: list[str] = []  # a folder's file of each frame that has arrived
         self._first_hash: str | None = None
         self._verified = None  # the signature at which frame 0 was last found unchanged
-        wait_s = self.idle_s if first_wait_s is None else float(first_wait_s)
-        deadline = time.monotonic() + wait_s
         while self._scan() == 0:
             if time.monotonic() > deadline or (should_stop is not None and should_stop()):
                 raise SsdpcError(

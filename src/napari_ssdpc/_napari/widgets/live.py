@@ -117,19 +117,14 @@ class LiveFollow:
 
     def _work(self, path: str, idle_s: float, job, built, sink):
         """The job: wait for the first frame, then reconstruct every frame as it arrives."""
-        from napari_ssdpc.io.followed import POLL_S, FollowedFrames
+        from napari_ssdpc.io.followed import FollowedFrames
         from napari_ssdpc.pipeline.run import Pipeline
 
         name = Path(path).name
 
         def work(progress, should_stop):
             progress(0, 0, f"waiting for the first frame of {name}")
-            deadline = time.monotonic() + idle_s
-            while not Path(path).exists() and time.monotonic() < deadline:  # the camera has not started yet
-                if should_stop():
-                    raise Cancelled("cancelled")
-                time.sleep(POLL_S)
-            try:
+            try:  # waits for the recording to appear and for its first frame
                 source = FollowedFrames(path, idle_s=idle_s, should_stop=should_stop)
             except SsdpcError:
                 if should_stop():
