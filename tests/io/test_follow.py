@@ -202,3 +202,16 @@ def test_a_recording_that_does_not_exist_yet_is_waited_for_within_the_idle_time(
     assert src.available() == 1 and np.array_equal(src[0], frames[0])
     with pytest.raises(SsdpcError, match="does not exist and did not appear within 0.3 s"):
         FollowedFrames(tmp_path / "never.tif", idle_s=0.3)
+
+
+def test_a_zarr_image_that_claims_more_frames_than_it_holds_gives_the_ones_written(data, tmp_path):
+    _, frames = data
+    path = tmp_path / "claims.zarr"
+    root = zarr.open_group(str(path), mode="w", zarr_format=2)
+    shape = frames.shape[1:]
+    a = root.create_array("0", shape=(10**9, *shape), chunks=(1, *shape), dtype="uint16", fill_value=0)
+    a[0], a[1] = frames[0], frames[1]
+    root.attrs["multiscales"] = [{"version": "0.4", "datasets": [{"path": "0"}], "axes": []}]
+    src = FollowedFrames(path, idle_s=5.0, settle_s=0.0)
+    assert src.available() == 2  # not 10⁹ frames of fill values
+    np.testing.assert_array_equal(src[1], frames[1])

@@ -224,8 +224,10 @@ class FollowedFrames:
             return self._pages, signature
         if self.kind == "zarr":
             array = self._zarr()
-            newest = max((e.stat().st_mtime_ns for e in _entries(self._level_dir)), default=0)
-            return int(array.shape[0]) if array.ndim == 3 else 1, (tuple(array.shape), newest)
+            entries = _entries(self._level_dir)
+            newest = max((e.stat().st_mtime_ns for e in entries), default=0)
+            count = _written_frames(array, entries, self._level_dir) if array.ndim == 3 else 1
+            return count, (tuple(array.shape), count, newest)
         files = sorted(
             (p for p in self.path.iterdir() if p.suffix.lower() in _TIFF), key=lambda p: _natural_key(p.name)
         )
@@ -299,6 +301,19 @@ class FollowedFrames:
                     SsdpcWarning,
                     stacklevel=2,
                 )
+
+
+def _written_frames(array, entries, level_dir: Path) -> int:
+    """Frames of a (t, y, x) zarr image whose chunks are on disk, from frame 0 on without a gap (its
+    metadata may announce more than were written: a writer ahead of its data, or a damaged claim)."""
+    names = [e.name for e in entries]
+    if (level_dir / "c").is_dir():  # zarr v3 keys: c/t/y/x
+        names = [e.name for e in _entries(level_dir / "c")]
+    starts = {int(head) for n in names if (head := n.split(".")[0]).isdigit()}
+    chunks = 0
+    while chunks in starts:
+        chunks += 1
+    return min(int(array.shape[0]), chunks * int(array.chunks[0]))
 
 
 def _hash(frame) -> str:
