@@ -9,17 +9,17 @@ __all__ = ["run"]
 
 
 def run(argv=None) -> int:
-    """Load and run `ssdpc`.
+    """Load and run `ssdpc` (:func:`napari_ssdpc.cli.main.main`).
 
     Parameters
     ----------
     argv : list of str, optional
-        The arguments (default: ``sys.argv[1:]``).
+        Passed on.
 
     Returns
     -------
     int
-        As :func:`napari_ssdpc.cli.main.main`; 130 when interrupted while it loads.
+        Its exit code, or 130 when interrupted while it loads.
     """
     try:
         from napari_ssdpc.cli.main import main
