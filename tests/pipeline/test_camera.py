@@ -1,6 +1,7 @@
 """Frames from a Micro-Manager core (pymmcore-plus's pure-Python camera, no hardware): every frame
 of an acquisition into the loop, the acquisition never held back, dropped frames counted."""
 
+import threading
 import time
 
 import numpy as np
@@ -65,15 +66,31 @@ def series(shape, n):
     return np.stack([np.full(shape, k + 1, np.uint16) for k in range(n)])
 
 
-def test_every_frame_of_an_acquisition_on_the_core_is_reconstructed(job):  # noqa: F811
+def _every_frame(job):  # noqa: F811
     shape = tuple(job.calibration.frame_shape)
     core = core_with(series(shape, 6))
     frames, rec, sink = CoreFrames(core, maxsize=None), CountingRec(), MemorySink()
+    watchdog = threading.Timer(30.0, frames.close)  # frames that never arrive end the run, not the test session
+    watchdog.start()
     acquisition = core.run_mda(useq.MDASequence(time_plan={"interval": 0, "loops": 6}))  # started elsewhere
     report = Pipeline(job, reconstructor=rec).run(frames, sink, progress=False)
     acquisition.join()
+    watchdog.cancel()
     assert report.written == 6 and report.dropped == [] and rec.seen == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
-    assert frames.finished()  # ended by the acquisition's end, not by a timeout
+    assert frames.finished()  # ended by the acquisition's end
+
+
+def test_every_frame_of_an_acquisition_on_the_core_is_reconstructed(job):  # noqa: F811
+    _every_frame(job)
+
+
+def test_a_core_with_qt_signals_delivers_frames_to_a_loop_that_blocks_the_gui_thread(job, qapp):  # noqa: F811
+    """In a Qt application (napari-micromanager's core) the core's signals are Qt signals: the frames
+    still reach a frame loop run on the GUI thread, whose event loop is not turning."""
+    from pymmcore_plus._util import signals_backend
+
+    assert signals_backend() == "qt"
+    _every_frame(job)
 
 
 def test_a_lagging_solver_never_holds_the_acquisition_back(job):  # noqa: F811

@@ -1,9 +1,9 @@
 """Frames from a camera on a Micro-Manager core (pymmcore-plus): every frame of any acquisition
 (MDA) run on that core, whoever started it, into the frame loop.
 
-The core's ``mda.events.frameReady`` pushes each frame into a bounded queue
-(:class:`~napari_ssdpc.pipeline.sources.LiveFrames`): the acquisition thread never waits for the
-solver; when the solver lags, the oldest waiting frame is dropped and counted. The acquisition's
+The core's ``mda.events.frameReady`` (connected directly, also for Qt signals) pushes each frame
+into a bounded queue (:class:`~napari_ssdpc.pipeline.sources.LiveFrames`): the acquisition thread
+never waits for the solver; when the solver lags, the oldest waiting frame is dropped and counted. The acquisition's
 ``sequenceFinished`` (or :meth:`CoreFrames.close`) ends the source, and the loop ends after the
 frames it kept. pymmcore-plus is an optional dependency (``pip install -e ".[live]"``); this module
 only uses the core it is given.
@@ -47,8 +47,8 @@ class CoreFrames(LiveFrames):
         super().__init__(shape, name, maxsize)
         self._core = core
         self._error: str | None = None
-        core.mda.events.frameReady.connect(self._on_frame)
-        core.mda.events.sequenceFinished.connect(self._on_finished)
+        _connect_direct(core.mda.events.frameReady, self._on_frame)
+        _connect_direct(core.mda.events.sequenceFinished, self._on_finished)
 
     def _on_frame(self, image, *_) -> None:
         """The acquisition thread's frame: queued, never waited on."""
@@ -87,3 +87,16 @@ class CoreFrames(LiveFrames):
         if self._error is not None:
             raise SsdpcError(self._error)
         return super().finished()
+
+
+def _connect_direct(signal, slot) -> None:
+    """Connect so that ``slot`` runs in the thread that emits (the acquisition's), whatever the core's
+    signal backend: with Qt signals (a core in a Qt application, as napari-micromanager's) a plain
+    connection would queue every frame to the GUI thread's event loop, which a script or a CLI run
+    blocking in the frame loop never turns. The slot only takes a lock and copies the frame."""
+    if type(signal).__module__.split(".")[0] == "psygnal":
+        signal.connect(slot)
+        return
+    from qtpy.QtCore import Qt
+
+    signal.connect(slot, Qt.ConnectionType.DirectConnection)
