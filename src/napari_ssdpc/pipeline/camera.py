@@ -11,6 +11,8 @@ only uses the core it is given.
 
 from __future__ import annotations
 
+import sys
+
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.pipeline.sources import LiveFrames
 
@@ -94,9 +96,9 @@ def _connect_direct(signal, slot) -> None:
     signal backend: with Qt signals (a core in a Qt application, as napari-micromanager's) a plain
     connection would queue every frame to the GUI thread's event loop, which a script or a CLI run
     blocking in the frame loop never turns. The slot only takes a lock and copies the frame."""
-    if type(signal).__module__.split(".")[0] == "psygnal":
+    module = sys.modules.get(type(signal).__module__)
+    qt = getattr(module, "Qt", None)  # a Qt binding's bound signal: its own QtCore module names the type
+    if qt is None:  # psygnal: slots run in the emitting thread
         signal.connect(slot)
         return
-    from qtpy.QtCore import Qt
-
-    signal.connect(slot, Qt.ConnectionType.DirectConnection)
+    signal.connect(slot, qt.ConnectionType.DirectConnection)
