@@ -14,10 +14,21 @@ import scipy.fft as sfft
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.apertures import disk_fraction, kohler_source, lenslet_source_weights
-from napari_ssdpc.physics.pupil import Pupil
+from napari_ssdpc.physics.pupil import Pupil, eta
+from napari_ssdpc.physics.waves import defocus_factor
 from napari_ssdpc.settings.optics import Optics
 
-__all__ = ["CropInterpolation", "even_fast", "lenslet_crops", "source_quadrature", "square_roi"]
+__all__ = [
+    "CropInterpolation",
+    "even_fast",
+    "even_planes",
+    "fits_memory",
+    "lenslet_crops",
+    "lit_views",
+    "slab_propagators",
+    "source_quadrature",
+    "square_roi",
+]
 
 
 def even_fast(m: int) -> int:
@@ -204,3 +215,95 @@ class CropInterpolation:
         nv = self.nv
         spec = self.bk.fft2(grad)[:, self._band[:, None], self._band[None, :]] / (nv * nv)
         return (self.bk.ifft2(spec * self._pix).real * (nv * nv)).astype(self.rdtype)
+
+
+def even_planes(z_um, dz_um=None) -> tuple[np.ndarray, float]:
+    """The model's planes and their spacing, checked to increase evenly.
+
+    Parameters
+    ----------
+    z_um : array_like, (Z,)
+        Plane centres, µm.
+    dz_um : float, optional
+        Spacing, µm (needed for a single plane).
+
+    Returns
+    -------
+    z : ndarray, (Z,)
+    dz : float
+    """
+    z = np.atleast_1d(np.asarray(z_um, float))
+    dz = float(dz_um) if dz_um is not None else float(z[1] - z[0]) if len(z) > 1 else 0.0
+    if dz <= 0 or (len(z) > 1 and np.ptp(np.diff(z)) > 1e-6 * dz):
+        raise SsdpcError("z_um must increase evenly (or give dz_um for a single plane)")
+    return z, dz
+
+
+def slab_propagators(w, n: int, dx: float, delta: float, medium_index: float, wavelength_um: float) -> np.ndarray:
+    """Propagation through one slab, per source point: exp(i2π δ [η(u + w) − η(w)]) (paper Eq. 6).
+
+    Parameters
+    ----------
+    w : ndarray, (S, 2)
+        Source points' spatial frequencies, 1/µm.
+    n : int
+        Model grid side, px.
+    dx : float
+        Model pixel, µm.
+    delta : float
+        Slab thickness, µm.
+    medium_index, wavelength_um : float
+
+    Returns
+    -------
+    ndarray, complex, (S, n, n)
+        On the FFT grid of the model.
+    """
+    f = np.fft.fftfreq(n, dx)
+    u2 = (f[None, None, :] + w[:, 0, None, None]) ** 2 + (f[None, :, None] + w[:, 1, None, None]) ** 2
+    e = eta(u2, medium_index, wavelength_um)
+    e0 = eta(np.sum(w * w, axis=1), medium_index, wavelength_um).real[:, None, None]
+    return defocus_factor(e, delta) * np.exp(-2j * np.pi * delta * e0)
+
+
+def lit_views(i0: np.ndarray) -> np.ndarray:
+    """The sample-free intensity of every view, refused where a view receives no direct light.
+
+    Parameters
+    ----------
+    i0 : ndarray, (K,)
+        Mean sample-free intensity per view.
+
+    Returns
+    -------
+    ndarray, (K,)
+        ``i0`` itself.
+    """
+    dark = np.flatnonzero(i0 <= 1e-6 * i0.max()).tolist()
+    if dark:
+        raise SsdpcError(
+            f"views {dark} receive no direct light from the model's source points: keep only lit "
+            "lenslets, or make source_spacing_na smaller"
+        )
+    return i0
+
+
+def fits_memory(bytes_needed: int, max_bytes: int | None, side_um: float, planes: int) -> None:
+    """Refuse a model larger than the free memory, with what to change.
+
+    Parameters
+    ----------
+    bytes_needed : int
+        The model's estimated size.
+    max_bytes : int or None
+        Free memory; None: not checked.
+    side_um : float
+        The region's side, µm.
+    planes : int
+    """
+    if max_bytes is not None and bytes_needed > max_bytes:
+        raise SsdpcError(
+            f"the multislice model of a {side_um:.0f} µm region with {planes} planes needs about "
+            f"{bytes_needed / 2**30:.1f} GiB but {max_bytes / 2**30:.1f} GiB are free: choose a smaller "
+            "region (--roi, or a Shapes layer in napari) or fewer source points (a larger source_spacing_na)"
+        )

@@ -59,9 +59,17 @@ import numpy as np
 
 from napari_ssdpc.backend import Backend, get_backend
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.physics.multislice_source import CropInterpolation, even_fast, lenslet_crops, source_quadrature
-from napari_ssdpc.physics.pupil import Pupil, eta
-from napari_ssdpc.physics.waves import defocus_factor
+from napari_ssdpc.physics.multislice_source import (
+    CropInterpolation,
+    even_fast,
+    even_planes,
+    fits_memory,
+    lenslet_crops,
+    lit_views,
+    slab_propagators,
+    source_quadrature,
+)
+from napari_ssdpc.physics.pupil import Pupil
 from napari_ssdpc.settings.optics import Optics
 
 __all__ = ["ViewsMultislice"]
@@ -174,10 +182,7 @@ class ViewsMultislice:
         refine, substeps = int(refine), int(substeps)
         if refine < 1 or substeps < 1:
             raise SsdpcError("refine and substeps must be positive integers")
-        z = np.atleast_1d(np.asarray(z_um, float))
-        dz = float(dz_um) if dz_um is not None else float(z[1] - z[0]) if len(z) > 1 else 0.0
-        if dz <= 0 or (len(z) > 1 and np.ptp(np.diff(z)) > 1e-6 * dz):
-            raise SsdpcError("z_um must increase evenly (or give dz_um for a single plane)")
+        z, dz = even_planes(z_um, dz_um)
         self.nv = nv = len(vx)
         self.n = n = nv * refine
         self.dx, self.dz, self.z_um, self.substeps = px / refine, dz, z, substeps
@@ -200,17 +205,9 @@ class ViewsMultislice:
         self.chunk = max(1, int(chunk))
         self.memory_mb = float(memory_mb)
         self.bytes_needed = self._bytes_needed(len(u_k))
-        if max_bytes is not None and self.bytes_needed > max_bytes:
-            raise SsdpcError(
-                f"the multislice model of a {nv * px:.0f} µm region with {len(z)} planes needs about "
-                f"{self.bytes_needed / 2**30:.1f} GiB but {max_bytes / 2**30:.1f} GiB are free: choose a smaller "
-                "region (--roi, or a Shapes layer in napari) or fewer source points (a larger source_spacing_na)"
-            )
+        fits_memory(self.bytes_needed, max_bytes, nv * px, len(z))
         # --- propagation through the volume, per source point: exp(i2π δ [η(u + w) − η(w)]) (Eq. 6)
-        f = np.fft.fftfreq(n, self.dx)
-        u2 = (f[None, None, :] + w[:, 0, None, None]) ** 2 + (f[None, :, None] + w[:, 1, None, None]) ** 2
-        e, e0 = eta(u2, nm, lam), eta(np.sum(w * w, axis=1), nm, lam).real[:, None, None]
-        h_slab = defocus_factor(e, self.delta) * np.exp(-2j * np.pi * self.delta * e0)
+        h_slab = slab_propagators(w, n, self.dx, self.delta, nm, lam)
         # --- lenslet crops: an m x m crop of the exit spectrum around u_k − w_j, for every pair ----
         ex, ey, ux, uy, inx, iny = lenslet_crops(w, w_sub, u_k, du, m, n)
         self.z_exit, self._k2 = z_exit, (nm / lam) ** 2
@@ -228,13 +225,7 @@ class ViewsMultislice:
         self._eta0 = xp_.asarray(eta0.astype(np.float32))[..., None, None, None]
         self._kernels: list | None = None
         i0 = self._interpolate(self._intensity(None)[0])  # sample-free views: constant per lenslet
-        self.i0 = np.asarray(self.bk.to_host(i0.mean(axis=(1, 2))), float)
-        if np.any(self.i0 <= 1e-6 * self.i0.max()):
-            dark = np.flatnonzero(self.i0 <= 1e-6 * self.i0.max()).tolist()
-            raise SsdpcError(
-                f"views {dark} receive no direct light from the model's source points: keep only lit "
-                "lenslets, or make source_spacing_na smaller"
-            )
+        self.i0 = lit_views(np.asarray(self.bk.to_host(i0.mean(axis=(1, 2))), float))
         self._i0 = xp_.asarray(self.i0.astype(self.rdtype))[:, None, None]
 
     def _bytes_needed(self, lenslets: int) -> int:
