@@ -14,35 +14,10 @@ from napari_ssdpc.pipeline.sinks import MemorySink
 unicore = pytest.importorskip("pymmcore_plus.experimental.unicore", reason="pymmcore-plus is not installed")
 useq = pytest.importorskip("useq", reason="useq-schema (with pymmcore-plus) is not installed")
 
+from camera_sim import core_with, series  # noqa: E402
 from napari_ssdpc.pipeline.camera import CoreFrames  # noqa: E402
 
 from .test_frame_loop import CountingRec, job  # noqa: E402, F401
-
-
-class SimulatedCamera(unicore.SimpleCameraDevice):
-    """Serves the given frames in turn, one every 15 ms (a 67 Hz camera; the paper records at 74 Hz)."""
-
-    def __init__(self, frames):
-        super().__init__()
-        self.frames, self.k, self.exposure = frames, 0, 10.0
-
-    def sensor_shape(self):
-        return self.frames.shape[1:]
-
-    def dtype(self):
-        return self.frames.dtype
-
-    def get_exposure(self):
-        return self.exposure
-
-    def set_exposure(self, value):
-        self.exposure = value
-
-    def snap(self, buffer):
-        time.sleep(0.015)
-        buffer[:] = self.frames[self.k % len(self.frames)]
-        self.k += 1
-        return {}
 
 
 class SlowRec(CountingRec):
@@ -51,19 +26,6 @@ class SlowRec(CountingRec):
     def reconstruct(self, frame, **kw):
         time.sleep(0.06)
         return super().reconstruct(frame, **kw)
-
-
-def core_with(frames):
-    core = unicore.UniMMCore()
-    core.loadPyDevice("Camera", SimulatedCamera(frames))
-    core.initializeDevice("Camera")
-    core.setCameraDevice("Camera")
-    core.setCircularBufferMemoryFootprint(1024)  # MB: the core never loses a frame of these tests
-    return core
-
-
-def series(shape, n):
-    return np.stack([np.full(shape, k + 1, np.uint16) for k in range(n)])
 
 
 def _every_frame(job):  # noqa: F811
@@ -116,3 +78,29 @@ def test_a_core_without_a_camera_or_a_frame_of_another_shape_is_one_line(job):  
     frames._on_frame(np.zeros((4, 4), np.uint16))
     with pytest.raises(SsdpcError, match="keep the camera ROI and binning fixed"):
         Pipeline(job, reconstructor=CountingRec()).run(frames, MemorySink(), progress=False)
+
+
+def test_a_camera_run_into_a_store_records_the_frames_kept_and_dropped(job, tmp_path):  # noqa: F811
+    import zarr
+
+    from napari_ssdpc.io.store import LIVE, done_frames, read_complete
+    from napari_ssdpc.pipeline.sinks import ZarrSink
+
+    shape = tuple(job.calibration.frame_shape)
+    core = core_with(series(shape, 30))
+    out = tmp_path / "live.zarr"
+    frames, rec = CoreFrames(core, maxsize=2), SlowRec()
+    acquisition = core.run_mda(useq.MDASequence(time_plan={"interval": 0, "loops": 30}))
+    report = Pipeline(job, reconstructor=rec).run(frames, ZarrSink(out), progress=False)
+    acquisition.join()
+    live = zarr.open_group(str(out), mode="r").attrs[LIVE]
+    kept = [t for a, b in live["kept"] for t in range(a, b + 1)]
+    dropped = [t for a, b in live["dropped"] for t in range(a, b + 1)]
+    assert live["frames"] == 30 and live["maxsize"] == 2 and dropped == report.dropped and dropped
+    assert kept == done_frames(out).tolist() and sorted(kept + dropped) == list(range(30))
+    ri = read_complete(out)  # a dropped frame is NaN, a kept one holds its frame's volume (mean k + 1)
+    assert np.isnan(ri[dropped[0]]).all() and np.allclose(ri[kept[-1]], 1.5 + (kept[-1] + 1) * 1e-3)
+    # a second acquisition into the same store would mix two acquisitions: refused, the store unchanged
+    with pytest.raises(SsdpcError, match="a live acquisition writes a new store"):
+        Pipeline(job, reconstructor=rec).run(CoreFrames(core_with(series(shape, 2))), ZarrSink(out), progress=False)
+    assert done_frames(out).tolist() == kept

@@ -147,7 +147,19 @@ def test_sinks_refuse_sources_they_cannot_hold(job, tmp_path):
     frames = np.zeros((2, *shape), np.uint16)
     with pytest.raises(SsdpcError, match="holds several frames; write a time series to OME-Zarr"):
         Pipeline(job, reconstructor=CountingRec()).run(frames, OmeTiffSink({"ri": tmp_path / "o.ome.tif"}))
-    live = LiveFrames(shape)
-    with pytest.raises(SsdpcError, match="a store needs the series' length"):
-        Pipeline(job, reconstructor=CountingRec()).run(live, ZarrSink(tmp_path / "s.zarr"))
-    assert not (tmp_path / "o.ome.tif").exists() and not (tmp_path / "s.zarr").exists()
+    assert not (tmp_path / "o.ome.tif").exists()
+
+
+def test_live_frames_grow_a_store_that_says_which_frames_it_kept(job, tmp_path):
+    import zarr
+
+    from napari_ssdpc.io.store import LIVE, done_frames
+
+    live = LiveFrames(tuple(job.calibration.frame_shape), maxsize=None)
+    for k in (10, 20, 30):
+        live.push(np.full(live.frame_shape, k, np.uint16))
+    live.close()
+    report = Pipeline(job, reconstructor=CountingRec()).run(live, ZarrSink(tmp_path / "s.zarr"), progress=False)
+    assert report.written == 3 and list(done_frames(tmp_path / "s.zarr")) == [0, 1, 2]
+    record = zarr.open_group(str(tmp_path / "s.zarr"), mode="r").attrs[LIVE]
+    assert record == {"frames": 3, "kept": [[0, 2]], "dropped": [], "maxsize": None}

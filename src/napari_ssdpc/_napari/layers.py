@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from napari_ssdpc.settings.outputs import display
+from napari_ssdpc.settings.outputs import QUANTITIES, display
 
 __all__ = [
     "PSF_STYLE",
@@ -19,6 +19,7 @@ __all__ = [
     "is_map",
     "object_extremes",
     "resolution_text",
+    "result_arrays",
     "result_layer",
 ]
 
@@ -280,3 +281,31 @@ def calibration_layers(cal, name: str) -> list:
         "vectors",
     )
     return [shapes, points, vectors]
+
+
+def result_arrays(res, wanted) -> dict:
+    """The wanted quantities of a core Result, channels split ('dpc_ud', 'stack_up', ...).
+
+    Parameters
+    ----------
+    res : Result
+        One reconstructed frame.
+    wanted : iterable of str
+        Registry names ('ri', 'opd_nm', 'dpc', ...).
+
+    Returns
+    -------
+    dict
+        {layer key: (z, y, x) volume or (y, x) map}; quantities the result does not hold are left out.
+    """
+    out = {}
+    for name in wanted:
+        q = QUANTITIES[name]
+        value = q.get(res)
+        if value is None or (q.kind == "channels" and not value):
+            continue
+        if q.kind == "channels":
+            out.update({k: np.asarray(value[c]) for c, k in zip(q.channels, q.channel_keys())})
+        else:
+            out[name] = np.asarray(value)
+    return out

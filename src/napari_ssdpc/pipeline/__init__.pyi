@@ -1,12 +1,13 @@
 from .frame import RunReport, process_frame
 from .job import Job
 from .run import Pipeline
-from .sinks import MemorySink, OmeTiffSink, OutputGrid, Sink, ZarrSink
+from .sinks import LatestSink, MemorySink, OmeTiffSink, OutputGrid, Sink, ZarrSink
 from .sources import FrameSource, LiveFrames, as_source
 
 __all__ = [
     "FrameSource",
     "Job",
+    "LatestSink",
     "LiveFrames",
     "MemorySink",
     "OmeTiffSink",

@@ -20,11 +20,11 @@ import numpy as np
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.io.frames import write_ome_tiffs
-from napari_ssdpc.io.store import grow_store, open_store, write_frame
+from napari_ssdpc.io.store import grow_store, open_store, record_live_frames, write_frame
 from napari_ssdpc.io.store_lock import StoreLock
 from napari_ssdpc.settings.outputs import layout, parse_save
 
-__all__ = ["MemorySink", "OmeTiffSink", "OutputGrid", "Sink", "ZarrSink"]
+__all__ = ["LatestSink", "MemorySink", "OmeTiffSink", "OutputGrid", "Sink", "ZarrSink"]
 
 
 @dataclass(frozen=True)
@@ -165,6 +165,18 @@ class MemorySink(Sink):
         return self.frames[max(self.frames)] if self.frames else None
 
 
+class LatestSink(Sink):
+    """Only the newest frame's result is kept (``last``: (t, Result)): memory constant however long a
+    live run."""
+
+    def __init__(self):
+        self.last: tuple[int, Any] | None = None
+
+    def _write(self, t, result) -> float:
+        self.last = (t, result)
+        return 0.0
+
+
 class OmeTiffSink(Sink):
     """One frame's RI and the saved quantities as OME-TIFF files, written as one unit (a source
     of several frames is refused).
@@ -228,6 +240,7 @@ class ZarrSink(Sink):
         self._length = 0
         self._digits: int | None = None
         self._digits_checked = False
+        self._live = None  # a live source, whose kept and dropped frames are recorded at the end
         if not self.out.parent.is_dir():
             raise SsdpcError(f"output folder does not exist: {self.out.parent} (create it first)")
         if self.out.exists() and not self.out.is_dir():
@@ -236,7 +249,8 @@ class ZarrSink(Sink):
     def _open(self, job, grid, source) -> set[int]:
         n = source.available()
         ident = source.identity()
-        growing = bool(ident.get("followed"))  # a recording still being written: the store grows with it
+        # a recording still being written, or a camera's frames: the store grows with them
+        growing = bool(ident.get("followed") or ident.get("live"))
         if not (source.finished() or growing):
             raise SsdpcError(f"{source.name}: a store needs the series' length; follow live frames into memory")
         layout = grid.layout(self.save)
@@ -257,6 +271,7 @@ class ZarrSink(Sink):
             self._close()
             raise
         self._length = int(done.shape[0])
+        self._live = source if ident.get("live") else None
         return set(np.flatnonzero(done[:] == 1).tolist())
 
     def _write(self, t, result) -> float:
@@ -270,8 +285,13 @@ class ZarrSink(Sink):
 
     def _close(self) -> None:
         if self._lock is not None:
-            self._lock.__exit__(None, None, None)
-            self._lock = None
+            try:
+                if self._live is not None:  # the frames kept and dropped, also after a stop or an error
+                    record_live_frames(self.out, self._live.summary())
+            finally:
+                self._live = None
+                self._lock.__exit__(None, None, None)
+                self._lock = None
 
 
 def _check_digits(digits: int, delta_n) -> None:

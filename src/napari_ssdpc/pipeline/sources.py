@@ -11,6 +11,7 @@ takes frames as they arrive (a camera callback, a writer) until it is closed.
 from __future__ import annotations
 
 import threading
+import time
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -103,6 +104,7 @@ class LiveFrames:
         self._name = name
         self._maxsize = maxsize
         self._frames: dict[int, np.ndarray] = {}
+        self._arrived: dict[int, float] = {}  # time.perf_counter() at each held frame's push, s
         self._count = 0
         self._claimed = -1
         self._dropped: list[int] = []
@@ -138,12 +140,12 @@ class LiveFrames:
             if self._closed:
                 raise SsdpcError(f"{self._name} is closed: no frame can be added")
             t = self._count
-            self._frames[t] = a
+            self._frames[t], self._arrived[t] = a, time.perf_counter()
             self._count += 1
             if self._maxsize is not None:
                 waiting = sorted(k for k in self._frames if k > self._claimed)
                 for k in waiting[: max(len(waiting) - self._maxsize, 0)]:
-                    del self._frames[k]
+                    del self._frames[k], self._arrived[k]
                     self._dropped.append(k)
             self._added.notify_all()
             return t
@@ -176,7 +178,7 @@ class LiveFrames:
         """
         with self._added:
             for k in [k for k in self._frames if k < t]:
-                del self._frames[k]
+                del self._frames[k], self._arrived[k]
             self._claimed = max(self._claimed, int(t))
             return int(t) in self._frames
 
@@ -184,6 +186,20 @@ class LiveFrames:
         """Indices of the frames dropped so far, in order."""
         with self._added:
             return sorted(self._dropped)
+
+    def arrived_at(self, t: int) -> float | None:
+        """When frame ``t`` was pushed (``time.perf_counter()``, s), while it is held; else None.
+
+        Parameters
+        ----------
+        t : int
+
+        Returns
+        -------
+        float or None
+        """
+        with self._added:
+            return self._arrived.get(int(t))
 
     def held(self) -> int:
         """Frames in memory now."""
@@ -208,5 +224,16 @@ class LiveFrames:
             return self._frames[int(t)]
 
     def identity(self) -> dict:
-        """A live source is not a recording: it cannot be resumed."""
-        return {"path": self._name, "size": None, "mtime_ns": None, "frames": None, "sha256": None}
+        """A live source is not a recording: it cannot be resumed (``live``: a store is written anew)."""
+        return {"path": self._name, "size": None, "mtime_ns": None, "frames": None, "sha256": None, "live": True}
+
+    def summary(self) -> dict:
+        """The frames kept and dropped so far, for the metadata of what the run writes.
+
+        Returns
+        -------
+        dict
+            ``frames`` (pushed), ``dropped`` (their indices) and ``maxsize`` (the queue's bound, None: all kept).
+        """
+        with self._added:
+            return {"frames": self._count, "dropped": sorted(self._dropped), "maxsize": self._maxsize}

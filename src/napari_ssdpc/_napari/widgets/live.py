@@ -21,15 +21,25 @@ from qtpy.QtCore import QTimer
 from napari_ssdpc._napari import notify
 from napari_ssdpc.errors import Cancelled, SsdpcError
 
-__all__ = ["LIVE_MS", "LiveFollow"]
+__all__ = ["LIVE_MS", "LiveFollow", "latency_text"]
 
 #: How often the store of a followed recording is shown again while it runs, ms.
 LIVE_MS = 250
 
 
-def _latency_text(seconds: dict) -> str:
-    """'0.42 s (median), 0.61 s (max)' of {frame: latency in s}."""
-    values = list(seconds.values())
+def latency_text(seconds) -> str:
+    """Median and max of latencies, e.g. '0.42 s (median), 0.61 s (max)' ('none' without any).
+
+    Parameters
+    ----------
+    seconds : iterable of float
+        Latencies, s.
+
+    Returns
+    -------
+    str
+    """
+    values = list(seconds)
     return f"{np.median(values):.2f} s (median), {max(values):.2f} s (max)" if values else "none"
 
 
@@ -183,8 +193,8 @@ class LiveFollow:
         self.show(store)
         return (
             f"{store.name}: {report.written} new frames, {report.frames} in all ({report.skipped} done before); "
-            f"latency from frame on disk to volume written {_latency_text(self.written_s)}, to layer shown "
-            f"{_latency_text(self.shown_s)}; no new frame for {idle_s:g} s: stopped"
+            f"latency from frame on disk to volume written {latency_text(self.written_s.values())}, to layer shown "
+            f"{latency_text(self.shown_s.values())}; no new frame for {idle_s:g} s: stopped"
         )
 
     def _ended(self, store: Path) -> None:

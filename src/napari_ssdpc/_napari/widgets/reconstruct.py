@@ -9,7 +9,8 @@ from magicgui.widgets import CheckBox, ComboBox, FileEdit, FloatSpinBox, SpinBox
 from qtpy.QtCore import QTimer
 
 from napari_ssdpc._napari import notify
-from napari_ssdpc._napari.layers import axial_fwhm_um, resolution_text, result_layer
+from napari_ssdpc._napari.layers import axial_fwhm_um, resolution_text, result_arrays, result_layer
+from napari_ssdpc._napari.widgets.camera import LiveCamera
 from napari_ssdpc._napari.widgets.choices import (
     LayerChoice,
     image_layer_choices,
@@ -33,38 +34,10 @@ from napari_ssdpc.settings.base import field_range
 from napari_ssdpc.settings.outputs import QUANTITIES
 from napari_ssdpc.settings.reconstruction import ReconstructionSettings, RlSettings, alpha_section
 
-__all__ = ["WATCH_MS", "ReconstructWidget", "result_arrays"]
+__all__ = ["WATCH_MS", "ReconstructWidget"]
 
 #: How often a series written to disk is shown again while it runs, ms.
 WATCH_MS = 1000
-
-
-def result_arrays(res, wanted) -> dict:
-    """The wanted quantities of a core Result, channels split ('dpc_ud', 'stack_up', ...).
-
-    Parameters
-    ----------
-    res : Result
-        One reconstructed frame.
-    wanted : iterable of str
-        Registry names ('ri', 'opd_nm', 'dpc', ...).
-
-    Returns
-    -------
-    dict
-        {layer key: (z, y, x) volume or (y, x) map}; quantities the result does not hold are left out.
-    """
-    out = {}
-    for name in wanted:
-        q = QUANTITIES[name]
-        value = q.get(res)
-        if value is None or (q.kind == "channels" and not value):
-            continue
-        if q.kind == "channels":
-            out.update({k: np.asarray(value[c]) for c, k in zip(q.channels, q.channel_keys())})
-        else:
-            out[name] = np.asarray(value)
-    return out
 
 
 class ReconstructWidget(StepWidget):
@@ -138,6 +111,7 @@ class ReconstructWidget(StepWidget):
         )
         self.run_button, self.cancel_button, self.status = run_buttons("Reconstruct", "RI volume of the frame(s)")
         self.live = LiveFollow(self)  # a recording still being written, into the same store
+        self.camera = LiveCamera(self)  # the frames of a Micro-Manager core, as they are acquired
         self.extend(
             [
                 self.raw,
@@ -150,6 +124,7 @@ class ReconstructWidget(StepWidget):
                 *self.outputs.values(),
                 self.run_button,
                 *self.live.widgets,
+                *self.camera.widgets,
                 self.cancel_button,
                 self.status,
             ]
