@@ -1,6 +1,8 @@
 """`ssdpc measure` and ``measure_result``: results written by the product's own sinks (a series
 store, an OME-TIFF) are read back, measured and tabled; bad input and foreign files are refused."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import tifffile
@@ -214,3 +216,22 @@ def test_a_damaged_store_is_one_line_and_writes_nothing(store, tmp_path, capsys,
     assert str(damaged) in line or "refraction increment" in line
     assert {"voxel-inf": "not finite", "ri-plus-5": "outside any sample's"}.get(how, "") in line
     assert not csv_path(damaged).exists()
+
+
+def test_impossible_claims_and_outputs_are_one_line_not_a_hang(store, tmp_path, capsys):
+    """Done flags claiming 10^9 frames are read from the flags written (not 10^9 absent chunks); a
+    device as the CSV (/dev/full, which never ends when read) is refused, never read or replaced."""
+    import shutil
+
+    from napari_ssdpc.io.store import DONE
+
+    claimed = tmp_path / "claimed.zarr"
+    shutil.copytree(store[0], claimed)
+    zarr.open_group(str(claimed), mode="r+")[DONE].resize((10**9,))
+    assert main(["measure", str(claimed), "-o", str(tmp_path / "claimed.csv")]) == 0
+    assert main(["measure", str(store[0]), "-o", str(tmp_path / "as-written.csv")]) == 0
+    rows = read_csv(tmp_path / "claimed.csv")
+    assert len({r["t"] for r in rows}) == 5 and rows == read_csv(tmp_path / "as-written.csv")
+    if Path("/dev/full").exists():
+        assert "not a regular file" in _one_line(capsys, ["measure", store[0], "-o", "/dev/full"])
+        assert Path("/dev/full").is_char_device()

@@ -215,3 +215,26 @@ def test_a_zarr_image_that_claims_more_frames_than_it_holds_gives_the_ones_writt
     src = FollowedFrames(path, idle_s=5.0, settle_s=0.0)
     assert src.available() == 2  # not 10⁹ frames of fill values
     np.testing.assert_array_equal(src[1], frames[1])
+
+
+def test_an_empty_or_half_written_file_in_a_folder_is_waited_for_then_named(data, tmp_path, capsys):
+    d, frames = data
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    tifffile.imwrite(folder / "img_0000.tif", frames[0])
+    (folder / "img_0001.tif").write_bytes(b"")  # created by the camera, not written yet
+    tifffile.imwrite(folder / "img_0002.tif", frames[2])
+    src = FollowedFrames(folder, idle_s=5.0, settle_s=0.0)
+    assert src.available() == 1 and not src.finished()  # frame 1 is waited for, frame 2 not taken in its place
+    whole = (folder / "img_0002.tif").read_bytes()
+    (folder / "img_0001.tif").write_bytes(whole[: len(whole) // 2])  # half written
+    assert src.available() == 1
+    tifffile.imwrite(folder / "img_0001.tif", frames[1])
+    assert src.available() == 3 and np.array_equal(src[1], frames[1]) and np.array_equal(src[2], frames[2])
+    # a file that stays empty: named once the idle time has passed; the frames before it are stored
+    (folder / "img_0003.tif").write_bytes(b"")
+    out = tmp_path / "out.zarr"
+    assert main(_args(d, folder, out, idle=0.5)) == 2
+    errors = _errors(capsys)
+    assert len(errors) == 1 and "img_0003.tif (frame 3) is empty or incomplete" in errors[0]
+    assert list(done_frames(out)) == [0, 1, 2]

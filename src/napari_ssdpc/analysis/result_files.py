@@ -139,7 +139,7 @@ def _damaged(opener):
 def _open_zarr(path: Path) -> StoredResult:
     import zarr
 
-    from napari_ssdpc.io.store import DONE
+    from napari_ssdpc.io.store import DONE, done_frames
 
     try:
         root: Any = zarr.open_group(str(path), mode="r")
@@ -167,8 +167,8 @@ def _open_zarr(path: Path) -> StoredResult:
         z, y, x = z0 + dz * np.arange(nz), _centred(ny, dy), _centred(nx, dx)
     if axes == "ZYX":
         frames = [0]
-    elif DONE in root:
-        frames = np.flatnonzero(root[DONE][:] == 1).tolist()
+    elif DONE in root:  # the frames marked complete that the image holds (flags claimed beyond it are not frames)
+        frames = [t for t in done_frames(path).tolist() if t < data.shape[0]]
     else:
         frames = list(range(data.shape[0]))
     return StoredResult(path, z, y, x, _medium(desc, path), _alpha(desc), frames, data, name == "ri")

@@ -100,6 +100,8 @@ class FollowedFrames:
         self._pages = 0  # complete pages of a TIFF at its last signature
         self._last_arrival = time.monotonic()
         self._names: list[str] = []  # a folder's file of each frame that has arrived
+        self._complete = 0  # a folder's leading files that hold a whole TIFF frame
+        self._checked: dict[str, tuple] = {}  # a folder's file -> (size, mtime) at which it was complete
         self._first_hash: str | None = None
         self._verified = None  # the signature at which frame 0 was last found unchanged
         while self._scan() == 0:
@@ -132,9 +134,23 @@ class FollowedFrames:
         return self._scan()
 
     def finished(self) -> bool:
-        """No frame has arrived for ``idle_s`` and none is being written."""
+        """No frame has arrived for ``idle_s`` and none is being written.
+
+        Raises
+        ------
+        SsdpcError
+            A folder's file stayed empty or incomplete for ``idle_s`` (named, with its frame). The
+            frame loop asks only once it has taken every frame that arrived.
+        """
         self._scan()
-        return self._count == self._ready and time.monotonic() - self._last_arrival > self.idle_s
+        idle = time.monotonic() - self._last_arrival > self.idle_s
+        if idle and self.kind == "folder" and self._complete < self._count:
+            name = self._files[self._complete].name
+            raise SsdpcError(
+                f"{self.path}: {name} (frame {self._complete}) is empty or incomplete and did not change for "
+                f"{self.idle_s:g} s; the frames before it are kept; complete or remove it, then follow again"
+            )
+        return self._count == self._ready and idle
 
     def wait(self, timeout_s: float) -> None:
         """Look again after ``timeout_s`` (at most :data:`POLL_S`).
@@ -201,7 +217,8 @@ class FollowedFrames:
                 self._signature, self._changed = signature, now
             settled = now - self._changed >= self.settle_s
             ready = count if settled else max(count - 1, 0)
-            if self.kind == "folder":
+            if self.kind == "folder":  # a file still empty or half written is waited for
+                ready = min(ready, self._complete)
                 self._keep_order(ready)
             if ready > self._ready:
                 stamp = time.time()
@@ -233,6 +250,7 @@ class FollowedFrames:
         )
         self._files = files
         self._name_gaps(files)
+        self._complete = self._ready + self._leading_complete(files[self._ready :])
         last = files[-1].stat() if files else None
         return len(files), (len(files), None if last is None else (last.st_size, last.st_mtime_ns))
 
@@ -256,6 +274,29 @@ class FollowedFrames:
             node = node[level]
         self._level_dir = self.path / level if level else self.path
         return node
+
+    def _leading_complete(self, files) -> int:
+        """How many of ``files`` in a row hold a whole TIFF frame (each file parsed once per change)."""
+        import tifffile
+
+        n = 0
+        for p in files:
+            try:
+                st = p.stat()
+            except OSError:  # removed between the listing and now
+                break
+            key = (st.st_size, st.st_mtime_ns)
+            if self._checked.get(p.name) != key:
+                try:
+                    with tifffile.TiffFile(p) as tif:
+                        whole = st.st_size > 0 and complete_pages(tif.pages[:1], st.st_size) == 1
+                except Exception:  # empty, or a header being written
+                    whole = False
+                if not whole:
+                    break
+                self._checked[p.name] = key
+            n += 1
+        return n
 
     def _read(self, t: int) -> np.ndarray:
         import tifffile

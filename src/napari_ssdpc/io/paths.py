@@ -155,6 +155,8 @@ def check_outputs(
             continue
         if out.is_dir():
             raise SsdpcError(f"{role} {out} is a folder; give a file path")
+        if out.exists() and not out.is_file():  # /dev/full, a pipe: never read, never replaced
+            raise SsdpcError(f"{role} {out} is not a regular file (a device or a pipe); give a file path")
         if out.exists() and not overwrite and not replaceable(out):
             raise SsdpcError(
                 f"the {role} {out} would replace a file napari-ssdpc did not write; move it away, "

@@ -289,7 +289,25 @@ def done_frames(out) -> np.ndarray:
     root = zarr.open_group(str(out), mode="r")
     if DONE not in root:
         return np.zeros(0, int)
-    return np.flatnonzero(root[DONE][:] == 1)
+    done = root[DONE]
+    # only the flags whose chunks are on disk (an unwritten flag is the fill value 0): a length that
+    # claims 10^9 frames costs nothing (reading every flag would visit 10^9 absent chunks)
+    written = _written_flags(Path(out) / DONE, done)
+    if written.size == 0:
+        return written
+    return written[np.asarray(done.get_coordinate_selection(written)) == 1]
+
+
+def _written_flags(folder: Path, done) -> np.ndarray:
+    """Indices of the done flags whose chunk files exist (zarr v2 keys ``k``, v3 ``c/k``), sorted."""
+    keys = folder / "c" if (folder / "c").is_dir() else folder
+    try:
+        chunks = sorted(int(p.name) for p in keys.iterdir() if p.name.isdigit())
+    except OSError:  # not a local folder: every flag is read
+        return np.arange(int(done.shape[0]))
+    step, n = int(done.chunks[0]), int(done.shape[0])
+    out = [np.arange(k * step, min((k + 1) * step, n)) for k in chunks if k * step < n]
+    return np.concatenate(out) if out else np.zeros(0, int)
 
 
 def read_complete(out, name: str = "ri") -> np.ndarray:

@@ -2,7 +2,7 @@ from .frame import RunReport, process_frame
 from .job import Job
 from .run import Pipeline
 from .sinks import LatestSink, MemorySink, OmeTiffSink, OutputGrid, Sink, ZarrSink
-from .sources import FrameSource, LiveFrames, as_source
+from .sources import FrameSource, LiveFrames, as_source, grows
 
 __all__ = [
     "FrameSource",
@@ -17,5 +17,6 @@ __all__ = [
     "Sink",
     "ZarrSink",
     "as_source",
+    "grows",
     "process_frame",
 ]

@@ -16,7 +16,7 @@ from napari_ssdpc.errors import Cancelled, SsdpcError
 from napari_ssdpc.pipeline.frame import RunReport, frame_bar, process_frame
 from napari_ssdpc.pipeline.job import Job
 from napari_ssdpc.pipeline.sinks import OutputGrid, Sink
-from napari_ssdpc.pipeline.sources import as_source
+from napari_ssdpc.pipeline.sources import as_source, grows
 
 __all__ = ["Pipeline"]
 
@@ -135,7 +135,7 @@ class Pipeline:
     def _loop(
         self, rec, source, sink, done, progress, on_frame, iteration_progress, should_stop, stop_after, warm_start
     ):
-        total = source.available() if source.finished() else None
+        total = None if grows(source) or not source.finished() else source.available()
         show = progress if progress is not None else (total is None or total > 1)
         bar = frame_bar(total, len(done), show)
         t0, timings, warm, t = time.perf_counter(), [], None, 0

@@ -22,6 +22,7 @@ from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.io.frames import write_ome_tiffs
 from napari_ssdpc.io.store import grow_store, open_store, record_live_frames, write_frame
 from napari_ssdpc.io.store_lock import StoreLock
+from napari_ssdpc.pipeline.sources import grows
 from napari_ssdpc.settings.outputs import layout, parse_save
 
 __all__ = ["LatestSink", "MemorySink", "OmeTiffSink", "OutputGrid", "Sink", "ZarrSink"]
@@ -249,9 +250,8 @@ class ZarrSink(Sink):
     def _open(self, job, grid, source) -> set[int]:
         n = source.available()
         ident = source.identity()
-        # a recording still being written, or a camera's frames: the store grows with them
-        growing = bool(ident.get("followed") or ident.get("live"))
-        if not (source.finished() or growing):
+        growing = grows(source)  # a recording still being written, or a camera's frames: the store grows with them
+        if not (growing or source.finished()):
             raise SsdpcError(f"{source.name}: a store needs the series' length; follow live frames into memory")
         layout = grid.layout(self.save)
         stamp = {

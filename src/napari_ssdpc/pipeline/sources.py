@@ -19,7 +19,7 @@ import numpy as np
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.io.frame_source import StoredFrames
 
-__all__ = ["FrameSource", "LiveFrames", "as_source"]
+__all__ = ["FrameSource", "LiveFrames", "as_source", "grows"]
 
 
 @runtime_checkable
@@ -54,6 +54,22 @@ class FrameSource(Protocol):
 
     def identity(self) -> dict:
         """What the frames are (path, size, SHA-256, ...), for the resume stamp."""
+
+
+def grows(source) -> bool:
+    """Whether a source's frames are still coming (a followed recording, a camera): its length is
+    not known, and it is asked whether it has finished only once its frames are taken.
+
+    Parameters
+    ----------
+    source : FrameSource
+
+    Returns
+    -------
+    bool
+    """
+    ident = source.identity()
+    return bool(ident.get("followed") or ident.get("live"))
 
 
 def as_source(frames) -> FrameSource:
