@@ -32,6 +32,7 @@ __all__ = [
     "check_optics_match",
     "check_result",
     "check_saturated",
+    "dark_pixel_index",
     "dark_pixels",
 ]
 
@@ -106,28 +107,46 @@ def _key(attr: str) -> str:
     return ".".join(PART_KEYS[attr]) if attr in PART_KEYS else attr
 
 
-def dark_pixels(img, cal, step: int = 8) -> np.ndarray:
-    """A sparse sample of the pixels farther than 1.2 EI radii from every lenslet centre.
+def dark_pixel_index(cal, step: int = 8) -> np.ndarray:
+    """Flat indices of a sparse sample of the pixels farther than 1.2 EI radii from every lenslet centre.
 
     Parameters
     ----------
-    img : ndarray, (H, W)
-        Camera units.
     cal : Calibration
+        Its frame shape, lenslet centres and EI radius.
     step : int
         Sampling step, px (a sparse sample is plenty for a median).
 
     Returns
     -------
-    ndarray, (N,)
-        The pixels' values (empty where the EIs fill the frame).
+    ndarray of int, (N,)
+        Indices into the raveled (H, W) frame (empty where the EIs fill the frame).
     """
-    yy, xx = np.mgrid[0 : img.shape[0] : step, 0 : img.shape[1] : step]
+    H, W = (int(v) for v in cal.frame_shape)
+    yy, xx = np.mgrid[0:H:step, 0:W:step]
     far = np.ones(yy.shape, bool)
     r2 = (1.2 * cal.ei_radius_px) ** 2
     for cx, cy in cal.centres_px:
         far &= (xx - cx) ** 2 + (yy - cy) ** 2 > r2
-    return np.asarray(img[yy[far], xx[far]])
+    return yy[far] * W + xx[far]
+
+
+def dark_pixels(img, cal, step: int = 8) -> np.ndarray:
+    """The values of the pixels of :func:`dark_pixel_index`.
+
+    Parameters
+    ----------
+    img : ndarray, (H, W)
+        Camera units (the calibration's frame shape).
+    cal : Calibration
+    step : int
+        Sampling step, px.
+
+    Returns
+    -------
+    ndarray, (N,)
+    """
+    return np.asarray(img).ravel()[dark_pixel_index(cal, step)]
 
 
 def check_constant(img, name: str) -> None:

@@ -12,6 +12,8 @@ disagreement gave wrong numbers with exit 0 (docs/reliability.md). Measured on e
 
 from __future__ import annotations
 
+import functools
+
 import math
 import warnings
 from typing import NamedTuple
@@ -92,18 +94,28 @@ def apparent_condenser_na(levels, lenslets, optics) -> ApparentNA:
     d = np.hypot(*np.array([ln.u for ln in lenslets], float)[inner].T)
     lv = np.clip(np.asarray(levels, float)[inner], 0, None)
     lv = lv / max(lv.max(), 1e-30)
+    nas, overlaps = _overlaps(tuple(d), float(optics.subaperture_radius), float(optics.wavelength_um), float(optics.na))
 
-    def misfit(na):  # Σ (lv − s m)² at the best scale s
-        m = circle_overlap_fraction(d, optics.subaperture_radius, na / optics.wavelength_um)
-        return float(lv @ lv - (lv @ m) ** 2 / max(m @ m, 1e-30))
+    def misfit(m):  # Σ (lv − s m)² at the best scale s, for each row of m
+        return lv @ lv - (m @ lv) ** 2 / np.maximum(np.einsum("ij,ij->i", m, m), 1e-30)
 
-    coarse = np.arange(0.01, optics.na + 1e-9, 0.005)
-    na0 = coarse[int(np.argmin([misfit(na) for na in coarse]))]
-    fine = np.arange(max(0.01, na0 - 0.005), min(optics.na, na0 + 0.005) + 1e-9, 0.0005)
-    err = [misfit(na) for na in fine]
+    coarse = np.arange(0, len(nas), 10)  # a 0.005 grid
+    k0 = int(coarse[int(np.argmin(misfit(overlaps[coarse])))])
+    fine = np.arange(max(0, k0 - 10), min(len(nas) - 1, k0 + 10) + 1)  # refined to 0.0005 about the best
+    err = misfit(overlaps[fine])
     best = int(np.argmin(err))
-    floor = max(err[best], MISFIT_FLOOR)
-    return ApparentNA(round(float(fine[best]), 4), (misfit(float(optics.condenser_na)) - err[best]) / floor, floor)
+    floor = max(float(err[best]), MISFIT_FLOOR)
+    m_optics = circle_overlap_fraction(d, optics.subaperture_radius, optics.condenser_na / optics.wavelength_um)
+    excess = (float(misfit(m_optics[None])[0]) - float(err[best])) / floor
+    return ApparentNA(round(float(nas[fine[best]]), 4), excess, floor)
+
+
+@functools.lru_cache(maxsize=16)
+def _overlaps(d: tuple, radius: float, wavelength_um: float, na_max: float) -> tuple[np.ndarray, np.ndarray]:
+    """Condenser NAs 0.01..na_max every 0.0005, and each lenslet's lit fraction at each: (N,), (N, K).
+    The same for every frame of a calibration: computed once."""
+    nas = 0.01 + 0.0005 * np.arange(int(np.floor((na_max - 0.01) / 0.0005 + 1e-6)) + 1)
+    return nas, np.array([circle_overlap_fraction(np.asarray(d), radius, na / wavelength_um) for na in nas])
 
 
 def check_lit_lenslets(lenslets, optics, name: str = "flat frame") -> None:
@@ -266,11 +278,12 @@ def ei_shift_px(img, templates) -> tuple[float, float]:
     if not items:
         return 0.0, 0.0
     n = items[0][2].shape[0]
-    acc = np.zeros((n, n))
-    for ix, iy, spec in items:
+    acc_hat = np.zeros_like(items[0][2])
+    for ix, iy, spec in items:  # the correlations are added in Fourier space: one inverse transform
         win = np.asarray(img[iy - h : iy + h + 1, ix - h : ix + h + 1], float)
         w = win - win.mean()
-        acc += cpu().irfft2(cpu().rfft2(w, s=(n, n)) * spec, s=(n, n)) / max(float(w.std()), 1e-12)
+        acc_hat += cpu().rfft2(w, s=(n, n)) * spec / max(float(w.std()), 1e-12)
+    acc = cpu().irfft2(acc_hat, s=(n, n))
     m = MAX_EI_SHIFT_PX
     near = np.roll(acc, (m, m), axis=(0, 1))[: 2 * m + 1, : 2 * m + 1]  # shifts −m..m
     py, px = np.unravel_index(int(np.argmax(near)), near.shape)

@@ -15,7 +15,7 @@ import numpy as np
 
 from napari_ssdpc.calibration.result import Calibration
 from napari_ssdpc.calibration.saturation import warn_saturation
-from napari_ssdpc.calibration.views import extract_views, view_grid
+from napari_ssdpc.calibration.views import ViewSampler, view_grid
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics import transfer
 from napari_ssdpc.physics.views_multislice import ViewsMultislice
@@ -25,7 +25,10 @@ from napari_ssdpc.settings.lenslets import HALVES
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.statistics import robust_sigma
 
-__all__ = ["ViewContrast"]
+__all__ = ["LEVEL_STEP", "ViewContrast"]
+
+#: A frame's light levels and exposure are medians over every LEVEL_STEP-th view pixel in y and x.
+LEVEL_STEP = 3
 
 
 def _noise(dark) -> float:
@@ -78,6 +81,13 @@ class ViewContrast:
         cal = calibration
         geom = view_grid(cal)  # the views' grid, from the calibration alone
         self.mask = geom.mask
+        self._sample = ViewSampler.of(cal)  # every frame's views: indices and weights computed once
+        self._inside = self._sample.inside()  # where a view lies on the sensor (the dark offset applies)
+        sparse = np.zeros(self.mask.shape, bool)
+        sparse[::LEVEL_STEP, ::LEVEL_STEP] = True
+        self._sparse = sparse & self.mask  # a frame's medians are taken over these view pixels
+        self._levels = self._sample.subset(self._sparse)
+        self._dark_index = checks.dark_pixel_index(cal)
         self.x_um, self.y_um, self.pixel_um = geom.x_um, geom.y_um, geom.pixel_um
         fv = None
         #: The condenser NA the flat's lenslets look lit at (None without a flat).
@@ -177,8 +187,32 @@ class ViewContrast:
         _, _, i0 = transfer.lenslet_transfer_functions(self.optics, self.calibration.lenslets, shape, self.pixel_um)
         return np.asarray(i0, float)
 
+    def _dark(self, frame, name: str):
+        """Check a raw or flat frame; its dark offset and the noise of its dark pixels.
+
+        Returns
+        -------
+        img : ndarray, float32, (H, W)
+        dark : float
+            Camera units.
+        noise : float
+            Noise of the dark pixels, camera units.
+        """
+        img = self.calibration.check_frame(frame, name=name)
+        checks.check_constant(img, name)
+        checks.check_saturated(frame, name)
+        dark_px = img.ravel()[self._dark_index]
+        if self.dark is None and dark_px.size < 100:
+            raise SsdpcError(
+                f"{name}: no dark pixels outside the elemental images to estimate the dark offset: the calibration's "
+                "EI radius or centres do not fit this camera (recalibrate on a white frame), or give the dark "
+                "offset (Python API: Reconstructor(..., dark=VALUE))"
+            )
+        dark = float(np.median(dark_px)) if self.dark is None else self.dark
+        return img, dark, _noise(dark_px if dark_px.size else img.ravel())
+
     def _measure(self, frame, name: str):
-        """Check a raw or flat frame and extract its views once.
+        """Check the flat frame and extract all its views (every pixel of every lenslet counts).
 
         Returns
         -------
@@ -189,21 +223,30 @@ class ViewContrast:
         views : ndarray, float32, (K, h, w)
             Dark-subtracted views of every lenslet.
         """
-        cal = self.calibration
-        img = cal.check_frame(frame, name=name)
-        checks.check_constant(img, name)
-        checks.check_saturated(frame, name)
-        dark_px = checks.dark_pixels(img, cal)
-        if self.dark is None and dark_px.size < 100:
-            raise SsdpcError(
-                f"{name}: no dark pixels outside the elemental images to estimate the dark offset: the calibration's "
-                "EI radius or centres do not fit this camera (recalibrate on a white frame), or give the dark "
-                "offset (Python API: Reconstructor(..., dark=VALUE))"
-            )
-        dark = float(np.median(dark_px)) if self.dark is None else self.dark
-        views = extract_views(img - dark, cal).data
+        img, dark, noise = self._dark(frame, name)
+        views = self._sample(img) - np.float32(dark) * self._inside  # = the views of img − dark (extract_views)
         levels = np.array([np.median(v[self.mask]) for v in views])
-        return levels, _noise(dark_px if dark_px.size else img.ravel()), views
+        return levels, noise, views
+
+    def _measure_frame(self, frame, name: str):
+        """Check a raw frame; the light of every lenslet and the views of the lit ones.
+
+        The levels are medians over every :data:`LEVEL_STEP`-th view pixel in y and x (a few
+        thousand pixels a lenslet: the light of a lenslet to 0.1 %, at a ninth of the cost).
+
+        Returns
+        -------
+        levels : ndarray, (K,)
+            Every lenslet's median light above the dark level.
+        noise : float
+            Noise of the dark pixels.
+        views : ndarray, float32, (K_lit, h, w)
+            Dark-subtracted views of the lit lenslets.
+        """
+        img, dark, noise = self._dark(frame, name)
+        light = self._levels(img) - np.float32(dark) * self._inside[:, self._sparse]
+        views = self._sample(img, self.lit) - np.float32(dark) * self._inside[self.lit]
+        return np.median(light, axis=1), noise, views
 
     def __call__(self, frame, name: str = "frame") -> np.ndarray:
         """The views of a raw frame: :meth:`measure` without the exposure."""
@@ -241,17 +284,17 @@ class ViewContrast:
             the flat itself.
         """
         warn_saturation(frame)
-        levels, noise, all_views = self._measure(frame, name)
+        levels, noise, views = self._measure_frame(frame, name)
         lit, expected = self.lit, self.level[self.lit]
         checks.check_frame_light(
             levels, noise, lit, expected, self.optics, name, self.calibration.lenslets, flat=self.flat is not None
         )
         consistency.check_ei_shift(consistency.ei_shift_px(frame, self._ei), name)
-        views = all_views[self.lit]
         exposure = 1.0
         if self.flat is not None:
             views = views / self.flat
-            exposure = float(np.median([np.median(v[m]) for v, m in zip(views, self.view_mask)]))
+            sparse = self.view_mask & self._sparse
+            exposure = float(np.median([np.median(v[m]) for v, m in zip(views, sparse)]))
             if np.all(np.abs(views[self.view_mask] - 1) < 1e-6):
                 raise SsdpcError(
                     f"{name} equals the flat frame (no contrast at all): give the flat recorded without the sample"
@@ -259,5 +302,5 @@ class ViewContrast:
             consistency.check_exposure(exposure, name)
             views = views / exposure
         else:
-            views = views / np.array([np.median(v[self.mask]) for v in views])[:, None, None]
+            views = views / np.median(views[:, self._sparse], axis=1)[:, None, None]
         return np.clip(np.where(self.view_mask, views, 0), 0, None).astype(np.float32), exposure
