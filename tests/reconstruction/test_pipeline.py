@@ -325,6 +325,25 @@ def test_a_moved_camera_or_an_edited_calibration_is_refused(case, calibration, r
         Reconstructor(run_config(case.optics, z=(-30, 30), dz=2), edited, flat=case.flat)
 
 
+@pytest.mark.parametrize("shift", [(2, 0), (-2, 3)])
+def test_in_a_series_every_frame_is_checked_for_a_moved_camera(case, calibration, monkeypatch, shift):
+    """The frames between the full checks (every tenth) are measured on the four brightest
+    elemental images (as precise as all of them where 16 are lit: docs/performance.md): a camera
+    moved in the middle of a series is refused on the first moved frame."""
+    from napari_ssdpc.reconstruction import consistency, contrast
+
+    monkeypatch.setattr(contrast, "EI_CHECK_S", 1e9)  # the frame count alone (a fast series)
+    views = Reconstructor(run_config(case.optics, z=(-30, 30), dz=2), calibration, flat=case.flat).views
+    dx, dy = shift
+    moved = np.roll(case.frame, (dy, dx), axis=(0, 1))
+    assert len(views._ei_few[1]) == min(contrast.EI_FEW, len(views._ei[1]))
+    assert consistency.ei_shift_px(moved, views._ei_few) == pytest.approx((dx, dy), abs=0.1)
+    for _ in range(3):
+        views.measure(case.frame)  # frame 0 on every EI, frames 1 and 2 on four
+    with pytest.raises(SsdpcError, match=re.escape(f"sit {dx:+.1f}, {dy:+.1f} px (x, y)")):
+        views.measure(moved)  # frame 3, on four
+
+
 def test_the_objects_of_the_reconstructed_weak_bead(result):
     """End to end: the bead measured on its `tv` reconstruction (condenser NA 0.1, dz 2 µm)."""
     from napari_ssdpc.analysis.objects import measure_objects

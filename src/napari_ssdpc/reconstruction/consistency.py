@@ -13,7 +13,6 @@ disagreement gave wrong numbers with exit 0 (docs/reliability.md). Measured on e
 from __future__ import annotations
 
 import functools
-
 import math
 import warnings
 from typing import NamedTuple

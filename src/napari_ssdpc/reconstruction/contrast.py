@@ -11,6 +11,8 @@ phase signal (docs/conventions.md) and are left out.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from napari_ssdpc.calibration.result import Calibration
@@ -25,10 +27,16 @@ from napari_ssdpc.settings.lenslets import HALVES
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.statistics import robust_sigma
 
-__all__ = ["LEVEL_STEP", "ViewContrast"]
+__all__ = ["EI_CHECK_FRAMES", "EI_CHECK_S", "EI_FEW", "LEVEL_STEP", "ViewContrast"]
 
 #: A frame's light levels and exposure are medians over every LEVEL_STEP-th view pixel in y and x.
 LEVEL_STEP = 3
+#: Every frame's elemental images are checked for a shift (a moved camera or array): on every lit
+#: one for the first frame, every EI_CHECK_FRAMES-th and any frame EI_CHECK_S after the last such
+#: check; on the EI_FEW brightest (wholly lit: clean disks) for the frames between (a quarter of the cost).
+EI_CHECK_FRAMES = 10
+EI_CHECK_S = 2.0
+EI_FEW = 4
 
 
 def _noise(dark) -> float:
@@ -88,6 +96,7 @@ class ViewContrast:
         self._sparse = sparse & self.mask  # a frame's medians are taken over these view pixels
         self._levels = self._sample.subset(self._sparse)
         self._dark_index = checks.dark_pixel_index(cal)
+        self._ei_since, self._ei_checked_at = EI_CHECK_FRAMES, -np.inf  # the first frame is checked
         self.x_um, self.y_um, self.pixel_um = geom.x_um, geom.y_um, geom.pixel_um
         fv = None
         #: The condenser NA the flat's lenslets look lit at (None without a flat).
@@ -105,6 +114,8 @@ class ViewContrast:
         if fv is not None:
             consistency.check_lit_lenslets(self.lenslets, optics)
         self._ei = consistency.ei_templates(cal, self.lit)  # where the calibration puts the lit images
+        brightest = self.lit[np.argsort(-level[self.lit], kind="stable")[:EI_FEW]]  # wholly lit: clean disks
+        self._ei_few = consistency.ei_templates(cal, np.sort(brightest))
         if flat is not None:
             consistency.check_ei_shift(consistency.ei_shift_px(flat, self._ei), "flat frame")
         if fv is not None:
@@ -248,6 +259,18 @@ class ViewContrast:
         views = self._sample(img, self.lit) - np.float32(dark) * self._inside[self.lit]
         return np.median(light, axis=1), noise, views
 
+    def _ei_check_due(self) -> bool:
+        """Whether this frame's shift is measured on every lit elemental image (else on the
+        :data:`EI_FEW` brightest): the first frame, then every
+        :data:`EI_CHECK_FRAMES`-th and any frame :data:`EI_CHECK_S` after the last full check (a frame
+        reconstructed on its own has all of them)."""
+        now = time.monotonic()
+        due = self._ei_since >= EI_CHECK_FRAMES - 1 or now - self._ei_checked_at >= EI_CHECK_S
+        self._ei_since = 0 if due else self._ei_since + 1
+        if due:
+            self._ei_checked_at = now
+        return due
+
     def __call__(self, frame, name: str = "frame") -> np.ndarray:
         """The views of a raw frame: :meth:`measure` without the exposure."""
         return self.measure(frame, name)[0]
@@ -289,7 +312,8 @@ class ViewContrast:
         checks.check_frame_light(
             levels, noise, lit, expected, self.optics, name, self.calibration.lenslets, flat=self.flat is not None
         )
-        consistency.check_ei_shift(consistency.ei_shift_px(frame, self._ei), name)
+        templates = self._ei if self._ei_check_due() else self._ei_few  # every frame checked, most on a few EIs
+        consistency.check_ei_shift(consistency.ei_shift_px(frame, templates), name)
         exposure = 1.0
         if self.flat is not None:
             views = views / self.flat
