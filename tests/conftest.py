@@ -70,9 +70,21 @@ def _qt_can_open_windows() -> str:
     )
 
 
+def _share_module_fixtures(items) -> None:
+    """Tests that share a module-scoped fixture (a simulated case and its reconstruction) run in one
+    worker under pytest-xdist's ``--dist loadgroup`` (CI's slow run): the fixture is made once."""
+    for item in items:
+        defs = getattr(getattr(item, "_fixtureinfo", None), "name2fixturedefs", {})
+        shared = [name for name in item.fixturenames if name in defs and defs[name][-1].scope == "module"]
+        shared = [name for name in shared if name != "cache"] or shared
+        if shared:
+            item.add_marker(pytest.mark.xdist_group(f"{item.path.name}::{shared[0]}"))
+
+
 def pytest_collection_modifyitems(config, items):
     """Skip the napari GUI tests, with the reason, where no display can be made or Qt cannot start
-    on it (Qt would abort the whole run)."""
+    on it (Qt would abort the whole run); group the tests of a module-scoped fixture."""
+    _share_module_fixtures(items)
     gui = [item for item in items if _GUI_FIXTURES & set(getattr(item, "fixturenames", ()))]
     if not gui:
         return

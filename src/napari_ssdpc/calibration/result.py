@@ -392,7 +392,7 @@ def validated(frame, name="frame") -> np.ndarray:
     if min(a.shape) < 16:
         raise SsdpcError(f"{name}: shape {a.shape} is too small for a light-field frame; give the full camera frame")
     img = a.astype(np.float32, copy=False)
-    if not np.all(np.isfinite(img)):
+    if a.dtype.kind == "f" and not np.all(np.isfinite(img)):  # an integer frame is finite
         bad = int(img.size - np.count_nonzero(np.isfinite(img)))
         raise SsdpcError(f"{name}: {bad} NaN/inf pixels; replace them or re-export the frame")
     return img

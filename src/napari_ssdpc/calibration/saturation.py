@@ -41,7 +41,7 @@ def saturated_fraction(frame, level=None) -> float:
     return float(np.mean(a >= top))
 
 
-def warn_saturation(frame, name="frame", level=None, threshold=1e-4) -> float:
+def warn_saturation(frame, name="frame", level=None, threshold=1e-4, fraction=None) -> float:
     """Warn (SsdpcWarning) with the saturated fraction when it exceeds ``threshold``.
 
     Parameters
@@ -53,13 +53,15 @@ def warn_saturation(frame, name="frame", level=None, threshold=1e-4) -> float:
         The saturation level.
     threshold : float
         Largest fraction without a warning.
+    fraction : float, optional
+        The saturated fraction, where already measured (:func:`saturated_fraction`).
 
     Returns
     -------
     float
         The saturated fraction.
     """
-    frac = saturated_fraction(frame, level)
+    frac = saturated_fraction(frame, level) if fraction is None else float(fraction)
     if frac > threshold:
         warnings.warn(
             f"{name}: {100 * frac:.3f}% of pixels are saturated; shorten the exposure or lower the illumination",

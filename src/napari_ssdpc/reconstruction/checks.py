@@ -172,21 +172,28 @@ def check_constant(img, name: str) -> None:
     raise SsdpcError(f"{name}: every pixel is {hi:g}: there is no image in it; check the camera and the file")
 
 
-def check_saturated(raw, name: str) -> None:
-    """Refuse a frame with more than 20 % of its pixels saturated.
+def check_saturated(raw, name: str) -> float:
+    """Refuse a frame with more than 20 % of its pixels saturated; warn above 0.01 %.
 
     Parameters
     ----------
     raw : ndarray, (H, W)
         As read (its dtype gives the camera's full scale).
     name : str
-        For the message.
+        For the messages.
+
+    Returns
+    -------
+    float
+        The saturated fraction.
     """
-    from napari_ssdpc.calibration.saturation import saturated_fraction
+    from napari_ssdpc.calibration.saturation import saturated_fraction, warn_saturation
 
     frac = saturated_fraction(raw)
+    warn_saturation(raw, name, fraction=frac)
     if frac > 0.2:
         raise SsdpcError(f"{name}: {100 * frac:.0f}% of the pixels are saturated; shorten the exposure or dim the lamp")
+    return frac
 
 
 def check_flat(levels, noise: float, optics, name: str = "flat frame", lenslets=None) -> float | None:

@@ -16,7 +16,6 @@ import time
 import numpy as np
 
 from napari_ssdpc.calibration.result import Calibration
-from napari_ssdpc.calibration.saturation import warn_saturation
 from napari_ssdpc.calibration.views import ViewSampler, view_grid
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics import transfer
@@ -306,7 +305,6 @@ class ViewContrast:
             the flat (a white frame, another condenser NA), its elemental images moved, or it is
             the flat itself.
         """
-        warn_saturation(frame)
         levels, noise, views = self._measure_frame(frame, name)
         lit, expected = self.lit, self.level[self.lit]
         checks.check_frame_light(
