@@ -37,3 +37,30 @@ def prepare_bead(viewer, qtbot, widgets, optics, z, dz):
     rc.raw.value = viewer.layers["PMMA bead"]
     rc.flat.value = viewer.layers["PMMA bead flat"]
     return widgets
+
+
+def live_bead_dock(make_napari_viewer, qtbot, monkeypatch, n_frames, z=(-10.0, 10.0), dz=5.0):
+    """The dock ready to reconstruct the sample bead live (a coarse grid, 'tv' with 5 iterations),
+    and ``n_frames`` camera frames of it, each with its own 1 % noise (every volume differs).
+
+    Returns
+    -------
+    viewer, widgets (by lower-case tab name, 'operators' too), frames (n, H, W) uint16, shown
+    (the error messages the plugin showed)
+    """
+    import numpy as np
+
+    from napari_ssdpc._napari import notify, sample_data
+
+    shown: list[str] = []
+    monkeypatch.setattr(notify, "error", lambda msg: shown.append(str(msg)))
+    viewer = make_napari_viewer()
+    _, dock = viewer.window.add_plugin_dock_widget("napari-ssdpc", "ssDPC")
+    w = {k.lower(): v for k, v in dock.tabs.items()}
+    w["operators"] = w["method"]
+    frame, _, _, optics = sample_data.bead_frames()
+    prepare_bead(viewer, qtbot, w, optics, z, dz)
+    w["operators"].sign.value, w["operators"].tv_iterations.value = "lighter", 5
+    rng = np.random.default_rng(0)
+    frames = np.stack([(frame * rng.normal(1.0, 0.01, frame.shape)).astype(frame.dtype) for _ in range(n_frames)])
+    return viewer, w, frames, shown

@@ -17,7 +17,6 @@ useq = pytest.importorskip("useq", reason="useq-schema (with pymmcore-plus) is n
 import gui_steps as _steps  # noqa: E402
 from camera_sim import core_with  # noqa: E402
 from napari_ssdpc._napari import notify as _notify  # noqa: E402
-from napari_ssdpc._napari import sample_data as _sample_data  # noqa: E402
 
 Z, DZ = (-10.0, 10.0), 5.0  # a coarse grid: 5 planes
 FRAMES = 4
@@ -32,17 +31,7 @@ def test_an_acquisition_on_the_core_is_reconstructed_live_into_the_layer_and_the
     from napari_ssdpc.pipeline.run import Pipeline
     from napari_ssdpc.pipeline.sinks import MemorySink
 
-    shown = []
-    monkeypatch.setattr(_notify, "error", lambda msg: shown.append(str(msg)))
-    viewer = make_napari_viewer()
-    _, dock = viewer.window.add_plugin_dock_widget("napari-ssdpc", "ssDPC")
-    w = {k.lower(): v for k, v in dock.tabs.items()}
-    w["operators"] = w["method"]
-    frame, flat, white, optics = _sample_data.bead_frames()
-    _steps.prepare_bead(viewer, qtbot, w, optics, Z, DZ)
-    w["operators"].sign.value, w["operators"].tv_iterations.value = "lighter", 5
-    rng = np.random.default_rng(0)  # each frame its own noise: every volume differs
-    frames = np.stack([(frame * rng.normal(1.0, 0.01, frame.shape)).astype(np.uint16) for _ in range(FRAMES)])
+    viewer, w, frames, shown = _steps.live_bead_dock(make_napari_viewer, qtbot, monkeypatch, FRAMES, Z, DZ)
     core = core_with(frames)
     rc = w["reconstruct"]
     store = tmp_path / "camera.zarr"

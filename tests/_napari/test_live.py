@@ -14,7 +14,6 @@ pytest.importorskip("pytestqt")
 
 import gui_steps as _steps
 from napari_ssdpc._napari import notify as _notify
-from napari_ssdpc._napari import sample_data as _sample_data
 
 Z, DZ = (-10.0, 10.0), 5.0  # a coarse grid: 5 planes
 FRAMES, PAUSE_S = 4, 0.5
@@ -42,17 +41,7 @@ def test_a_recording_being_written_grows_the_layer_and_a_rerun_recomputes_nothin
     from napari_ssdpc.pipeline.run import Pipeline
     from napari_ssdpc.pipeline.sinks import MemorySink
 
-    shown = []
-    monkeypatch.setattr(_notify, "error", lambda msg: shown.append(str(msg)))
-    viewer = make_napari_viewer()
-    _, dock = viewer.window.add_plugin_dock_widget("napari-ssdpc", "ssDPC")
-    w = {k.lower(): v for k, v in dock.tabs.items()}
-    w["operators"] = w["method"]
-    frame, flat, white, optics = _sample_data.bead_frames()
-    _steps.prepare_bead(viewer, qtbot, w, optics, Z, DZ)
-    w["operators"].sign.value, w["operators"].tv_iterations.value = "lighter", 5
-    rng = np.random.default_rng(0)  # each frame its own noise: every volume differs
-    frames = [(frame * rng.normal(1.0, 0.01, frame.shape)).astype(frame.dtype) for _ in range(FRAMES)]
+    viewer, w, frames, shown = _steps.live_bead_dock(make_napari_viewer, qtbot, monkeypatch, FRAMES, Z, DZ)
     rc = w["reconstruct"]
     raw, store = tmp_path / "camera.tif", tmp_path / "live.zarr"
     rc.store.value, rc.live.recording.value, rc.live.idle.value = store, raw, 1.5

@@ -1,10 +1,51 @@
-"""The plugin's notifications, in one place: napari's toasts (tests replace these functions)."""
+"""The plugin's notifications, in one place: napari's toasts (tests replace these functions).
+
+The core's messages name the command line's flags (``--method multislice``); a toast says the
+same in the dock's words (:func:`gui_words`).
+"""
 
 from __future__ import annotations
 
+import re
+
 from napari.utils import notifications
 
-__all__ = ["error", "info", "warning"]
+__all__ = ["error", "gui_words", "info", "warning"]
+
+#: (pattern, words) for the flags the core's messages name, in the order they are applied.
+_GUI_WORDS = (
+    (r"reconstruct with --method (\w+)", r"choose the phase method '\1' (Method tab)"),
+    (r"--method (\w+)", r"the phase method '\1' (Method tab)"),
+    (r"\(--tv-warm-iterations\)", "(in the run configuration)"),
+    (r"\(`ssdpc calibrate WHITE.tif --optics ...`\)", "(Calibrate tab)"),
+    (r"\(--optics\)", "(Optics tab)"),
+    (r"--optics\b", "the optics (Optics tab)"),
+    (r"\(--multislice-iterations, or the run configuration's multislice: iterations\)", "(in the run configuration)"),
+    (r"--multislice-iterations\b", "the multislice iterations (in the run configuration)"),
+    (r"\(--roi, or a Shapes layer in napari\)", "(a Shapes layer as the multislice region, Reconstruct tab)"),
+    (r"\(--roi\)", "(a Shapes layer as the multislice region, Reconstruct tab)"),
+    (r"--dz ([0-9.]+)", r"dz \1 µm"),
+    (r"--z\b", "z min / z max (Method tab)"),
+    (r"--dz\b", "dz (Method tab)"),
+    (r"--alpha\b", "the Tikhonov α (Reconstruct tab)"),
+)
+
+
+def gui_words(message) -> str:
+    """A core message with the command line's flags said in the dock's words.
+
+    Parameters
+    ----------
+    message : str or Exception
+
+    Returns
+    -------
+    str
+    """
+    text = str(message)
+    for pattern, words in _GUI_WORDS:
+        text = re.sub(pattern, words, text)
+    return text
 
 
 def error(message) -> None:
@@ -14,7 +55,7 @@ def error(message) -> None:
     ----------
     message : str or Exception
     """
-    notifications.show_error(str(message))
+    notifications.show_error(gui_words(message))
 
 
 def warning(message) -> None:
@@ -24,7 +65,7 @@ def warning(message) -> None:
     ----------
     message : str or Exception
     """
-    notifications.show_warning(str(message))
+    notifications.show_warning(gui_words(message))
 
 
 def info(message) -> None:
@@ -34,4 +75,4 @@ def info(message) -> None:
     ----------
     message : str or Exception
     """
-    notifications.show_info(str(message))
+    notifications.show_info(gui_words(message))

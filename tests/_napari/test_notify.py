@@ -1,0 +1,50 @@
+"""The dock's toasts say the core's messages in the dock's words, not the command line's flags."""
+
+import pytest
+
+pytest.importorskip("napari")
+
+from napari_ssdpc._napari.notify import gui_words
+
+
+@pytest.mark.parametrize(
+    "core, dock",
+    [
+        (
+            "'tv' underestimates such objects; reconstruct with --method multislice",
+            "'tv' underestimates such objects; choose the phase method 'multislice' (Method tab)",
+        ),
+        (
+            "needs 30 GiB but 4.0 GiB are free; narrow --z or take a larger --dz (e.g. --dz 2)",
+            "needs 30 GiB but 4.0 GiB are free; narrow z min / z max (Method tab) or take a larger dz (Method tab) "
+            "(e.g. dz 2 µm)",
+        ),
+        (
+            "give a region inside it (--roi)",
+            "give a region inside it (a Shapes layer as the multislice region, Reconstruct tab)",
+        ),
+        ("Check --dz and --alpha", "Check dz (Method tab) and the Tikhonov α (Reconstruct tab)"),
+        ("raise tv.warm_iterations (--tv-warm-iterations)", "raise tv.warm_iterations (in the run configuration)"),
+    ],
+)
+def test_flags_become_the_dock_s_words(core, dock):
+    assert gui_words(core) == dock and "--" not in gui_words(core)
+
+
+def test_the_core_s_flag_messages_are_all_translated():
+    """Every flag a reconstruction's message names has its words in the dock (the calibration's
+    ``--axis X Y`` has no field in the dock: its message names the command)."""
+    import re
+    from pathlib import Path
+
+    import napari_ssdpc
+
+    root = Path(napari_ssdpc.__file__).parent
+    flags = set()
+    for folder in ("reconstruction", "physics"):
+        for path in (root / folder).rglob("*.py"):
+            for line in path.read_text(encoding="utf-8").splitlines():
+                if '"' in line and not line.strip().startswith("#"):
+                    flags.update(re.findall(r"--[a-z][a-z-]*(?: [a-z0-9]+)?", line))
+    left = {f for f in flags if "--" in gui_words(f"({f})") and "--" in gui_words(f"reconstruct with {f}")}
+    assert not left, f"core messages name flags the dock does not translate: {sorted(left)}"
