@@ -72,13 +72,19 @@ def _qt_can_open_windows() -> str:
 
 def _share_module_fixtures(items) -> None:
     """Tests that share a module-scoped fixture (a simulated case and its reconstruction) run in one
-    worker under pytest-xdist's ``--dist loadgroup`` (CI's slow run): the fixture is made once."""
+    worker under pytest-xdist's ``--dist loadgroup`` (CI's slow run): the fixture is made once. The
+    fixtures a module lists in ``SLOWEST_FIRST`` go first, the longest first, so that the workers
+    end together."""
+    rank = {}
     for item in items:
         defs = getattr(getattr(item, "_fixtureinfo", None), "name2fixturedefs", {})
         shared = [name for name in item.fixturenames if name in defs and defs[name][-1].scope == "module"]
         shared = [name for name in shared if name != "cache"] or shared
         if shared:
             item.add_marker(pytest.mark.xdist_group(f"{item.path.name}::{shared[0]}"))
+        order = tuple(getattr(getattr(item, "module", None), "SLOWEST_FIRST", ()))
+        rank[item] = order.index(shared[0]) if shared and shared[0] in order else len(order) + 1000
+    items.sort(key=lambda item: rank[item])  # stable: the others keep their order
 
 
 def pytest_collection_modifyitems(config, items):

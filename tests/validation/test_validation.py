@@ -19,6 +19,10 @@ from napari_ssdpc.validation.truth import truth_volume
 
 pytestmark = pytest.mark.slow
 
+#: The module's fixtures, the longest first (setup on 2 cores: 858, 708, 568, 351, 336, 248, 236,
+#: 228 s): CI's slow run starts them first on its workers (tests/conftest.py).
+SLOWEST_FIRST = ("two_beads", "silica", "stacked", "cell", "bead", "weak_bead", "cache", "silica_bead")
+
 
 @pytest.fixture(scope="module")
 def cache(tmp_path_factory):
