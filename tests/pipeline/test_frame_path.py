@@ -15,13 +15,13 @@ def test_ssdpc_reconstruct_cuts_the_flat_and_the_frame_into_views_once(synthetic
     tifffile.imwrite(tmp_path / "flat.tif", flat)
     cal.to_json(tmp_path / "cal.json")
     cut = []
-    real = contrast.extract_views
+    real = contrast.ViewContrast._dark  # every frame's checks and dark offset, before its views are cut
 
-    def counting(frame, calibration):
+    def counting(self, frame, name):
         cut.append(float(np.max(frame)))
-        return real(frame, calibration)
+        return real(self, frame, name)
 
-    monkeypatch.setattr(contrast, "extract_views", counting)
+    monkeypatch.setattr(contrast.ViewContrast, "_dark", counting)
     args = ["reconstruct", str(tmp_path / "frame.tif"), "--calibration", str(tmp_path / "cal.json")]
     args += ["--flat", str(tmp_path / "flat.tif"), "--z", "-20", "20", "--dz", "10", "--method", "wotf"]
     assert main([*args, "-o", str(tmp_path / "out.ome.tif")]) == 0
