@@ -27,7 +27,8 @@ def test_an_acquisition_on_the_core_is_reconstructed_live_into_the_layer_and_the
 ):
     import zarr
 
-    from napari_ssdpc.io.store import LIVE, done_frames, read_complete
+    from napari_ssdpc.io.live_store import LIVE
+    from napari_ssdpc.io.store import done_frames, read_complete
     from napari_ssdpc.pipeline.run import Pipeline
     from napari_ssdpc.pipeline.sinks import MemorySink
 

@@ -83,7 +83,8 @@ def test_a_core_without_a_camera_or_a_frame_of_another_shape_is_one_line(job):  
 def test_a_camera_run_into_a_store_records_the_frames_kept_and_dropped(job, tmp_path):  # noqa: F811
     import zarr
 
-    from napari_ssdpc.io.store import LIVE, done_frames, read_complete
+    from napari_ssdpc.io.live_store import LIVE
+    from napari_ssdpc.io.store import done_frames, read_complete
     from napari_ssdpc.pipeline.sinks import ZarrSink
 
     shape = tuple(job.calibration.frame_shape)

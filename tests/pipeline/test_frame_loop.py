@@ -153,7 +153,8 @@ def test_sinks_refuse_sources_they_cannot_hold(job, tmp_path):
 def test_live_frames_grow_a_store_that_says_which_frames_it_kept(job, tmp_path):
     import zarr
 
-    from napari_ssdpc.io.store import LIVE, done_frames
+    from napari_ssdpc.io.live_store import LIVE
+    from napari_ssdpc.io.store import done_frames
 
     live = LiveFrames(tuple(job.calibration.frame_shape), maxsize=None)
     for k in (10, 20, 30):

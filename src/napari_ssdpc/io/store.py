@@ -30,18 +30,15 @@ __all__ = [
     "STAMP",
     "check_input_unchanged",
     "done_frames",
-    "LIVE",
     "grow_store",
     "mask_incomplete",
     "open_store",
     "read_complete",
-    "record_live_frames",
     "write_frame",
 ]
 
 DONE = "ssdpc_done"  # root array: 1 where a frame is completely written
 STAMP = "ssdpc_series"  # root attribute: what the store holds (input, settings, outputs)
-LIVE = "ssdpc_live"  # root attribute of a live acquisition's store: the frames kept and dropped
 _METADATA = {".zgroup", ".zattrs", ".zarray", "zarr.json"}
 
 
@@ -387,46 +384,3 @@ def grow_store(out, n_frames: int) -> None:
                 a.resize((int(n_frames),) + tuple(a.shape[1:]))
     except OSError as e:
         raise os_error(e, Path(out)) from None
-
-
-def _ranges(indices) -> list[list[int]]:
-    """[[first, last], ...] of the runs of consecutive indices (sorted), e.g. [0, 1, 2, 5] -> [[0, 2], [5, 5]]."""
-    runs: list[list[int]] = []
-    for t in sorted(int(t) for t in indices):
-        if runs and t == runs[-1][1] + 1:
-            runs[-1][1] = t
-        else:
-            runs.append([t, t])
-    return runs
-
-
-def record_live_frames(out, summary: dict) -> dict:
-    """Write which frames of a live acquisition the store holds and which were dropped (attribute ``ssdpc_live``).
-
-    Parameters
-    ----------
-    out : str or Path
-        The store.
-    summary : dict
-        The source's ``summary()``: ``frames`` (frames the camera gave), ``dropped`` (indices the solver
-        could not keep up with) and ``maxsize`` (the queue's bound; None: every frame kept).
-
-    Returns
-    -------
-    dict
-        What was written: ``frames``, ``kept`` and ``dropped`` (runs ``[[first, last], ...]`` of frame
-        indices), ``maxsize``. Frames neither kept nor dropped were cut off by a stop or an error.
-    """
-    import zarr
-
-    record = {
-        "frames": int(summary["frames"]),
-        "kept": _ranges(done_frames(out)),
-        "dropped": _ranges(summary["dropped"]),
-        "maxsize": summary["maxsize"],
-    }
-    try:
-        zarr.open_group(str(out), mode="r+").attrs[LIVE] = record
-    except OSError as e:
-        raise os_error(e, Path(out)) from None
-    return record

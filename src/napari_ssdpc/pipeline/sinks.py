@@ -20,7 +20,8 @@ import numpy as np
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.io.frames import write_ome_tiffs
-from napari_ssdpc.io.store import grow_store, open_store, record_live_frames, write_frame
+from napari_ssdpc.io.live_store import record_live_frames
+from napari_ssdpc.io.store import grow_store, open_store, write_frame
 from napari_ssdpc.io.store_lock import StoreLock
 from napari_ssdpc.pipeline.sources import grows
 from napari_ssdpc.settings.outputs import layout, parse_save
