@@ -239,20 +239,9 @@ class ViewContrast:
         return levels, noise, views
 
     def _measure_frame(self, frame, name: str):
-        """Check a raw frame; the light of every lenslet and the views of the lit ones.
-
-        The levels are medians over every :data:`LEVEL_STEP`-th view pixel in y and x (a few
-        thousand pixels a lenslet: the light of a lenslet to 0.1 %, at a ninth of the cost).
-
-        Returns
-        -------
-        levels : ndarray, (K,)
-            Every lenslet's median light above the dark level.
-        noise : float
-            Noise of the dark pixels.
-        views : ndarray, float32, (K_lit, h, w)
-            Dark-subtracted views of the lit lenslets.
-        """
+        """Check a raw frame: as :meth:`_measure`, but only the lit lenslets' views (K_lit, h, w), and
+        the levels as medians over every :data:`LEVEL_STEP`-th view pixel in y and x (a few thousand
+        pixels a lenslet: the light of a lenslet to 0.1 %, at a ninth of the cost)."""
         img, dark, noise = self._dark(frame, name)
         light = self._levels(img) - np.float32(dark) * self._inside[:, self._sparse]
         views = self._sample(img, self.lit) - np.float32(dark) * self._inside[self.lit]
