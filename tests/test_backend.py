@@ -2,6 +2,7 @@
 
 GPU tests run only where CuPy sees a CUDA GPU; everything else is checked with NumPy."""
 
+import threading
 import types
 
 import numpy as np
@@ -69,6 +70,36 @@ def _band_limited_otfs(shape=(64, 60), k=3, z=4, radius=0.2, seed=0):
     keep = np.zeros(otf.shape[-2:], bool)
     band.put(keep, np.ones(band.box_shape, bool))
     return otf * keep, band
+
+
+def _blas_threads() -> list[int]:
+    from threadpoolctl import threadpool_info
+
+    return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+
+def test_products_run_on_one_blas_thread_and_give_the_threads_back():
+    from threadpoolctl import threadpool_limits
+
+    rng = np.random.default_rng(0)
+    a = rng.standard_normal((50, 16, 285)).astype(np.complex64)
+    b = rng.standard_normal((50, 285, 1)).astype(np.complex64)
+    with threadpool_limits(3, user_api="blas"):  # as on a 3-core machine
+        if not _blas_threads():
+            pytest.skip("no BLAS library that threadpoolctl can steer")
+        hold = backend.one_blas_thread()
+        with hold:
+            assert set(_blas_threads()) == {1}
+            with backend.one_blas_thread():  # nested: one shared hold
+                assert set(_blas_threads()) == {1}
+            assert set(_blas_threads()) == {1}
+            inside = threading.Thread(target=lambda: np.testing.assert_array_equal(backend.matmul(a, b), a @ b))
+            inside.start()
+            inside.join()  # a concurrent holder leaving does not end this one
+            assert set(_blas_threads()) == {1}
+        assert set(_blas_threads()) == {3}  # the last holder out restores them
+        np.testing.assert_allclose(backend.matmul(a, b), a @ b, rtol=1e-5)
+        assert set(_blas_threads()) == {3}
 
 
 def test_band_take_and_put_are_inverse():

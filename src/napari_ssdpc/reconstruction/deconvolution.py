@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.fft as sfft
 
-from napari_ssdpc.backend import cpu, get_backend
+from napari_ssdpc.backend import cpu, get_backend, matmul
 from napari_ssdpc.errors import SsdpcError
 
 
@@ -307,7 +307,7 @@ class MultiViewRL:
         xp = self.bk.xp
         o = self._spectrum(xp.asarray(obj, dtype=np.float32))  # (Z, *box)
         o = xp.ascontiguousarray(o.reshape(self.z, -1).T)[..., None]  # (F, Z, 1)
-        v = xp.matmul(self.otf, o)[..., 0]  # (F, K)
+        v = matmul(self.otf, o)[..., 0]  # (F, K)
         return self._image(xp.ascontiguousarray(v.T).reshape((self.k,) + self.band.box_shape))
 
     def adjoint(self, views):
@@ -324,7 +324,7 @@ class MultiViewRL:
         xp = self.bk.xp
         r = self._spectrum(xp.asarray(views, dtype=np.float32))  # (K, *box)
         r = xp.ascontiguousarray(xp.conj(r).reshape(self.k, -1).T)[:, None, :]  # (F, 1, K)
-        a = xp.matmul(r, self.otf)[:, 0, :]  # (F, Z): Σ_k conj(r_k) h_kz
+        a = matmul(r, self.otf)[:, 0, :]  # (F, Z): Σ_k conj(r_k) h_kz
         return self._image(xp.conj(a.T).reshape((self.z,) + self.band.box_shape))
 
     # ------------------------------------------------------------------- RL

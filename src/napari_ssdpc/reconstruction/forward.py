@@ -28,7 +28,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 import scipy.fft as sfft
 
-from napari_ssdpc.backend import Backend, get_backend
+from napari_ssdpc.backend import Backend, get_backend, matmul
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics import transfer
 from napari_ssdpc.reconstruction.deconvolution import Band
@@ -303,7 +303,7 @@ def apply(m, x) -> np.ndarray:
     -------
     ndarray, (P, M)
     """
-    return (m @ x[:, :, None])[:, :, 0]
+    return matmul(m, x[:, :, None])[:, :, 0]
 
 
 def padded_planes(z_um, r_z_um: float, pad_um: float | None = None) -> tuple[np.ndarray, slice]:
