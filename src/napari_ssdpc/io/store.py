@@ -34,6 +34,7 @@ __all__ = [
     "mask_incomplete",
     "open_store",
     "read_complete",
+    "stamp_of",
     "write_frame",
 ]
 
@@ -188,7 +189,8 @@ def open_store(out, n_frames: int, layout: dict, voxel, stamp: dict, attrs: dict
 
 
 def write_frame(out, t: int, images: dict) -> float:
-    """Write one frame's images into the store, then mark the frame done.
+    """Write one frame's images into the store, then mark the frame done (the caller has checked
+    the frame: :func:`check_input_unchanged`).
 
     Parameters
     ----------
@@ -213,15 +215,34 @@ def write_frame(out, t: int, images: dict) -> float:
         root = zarr.open_group(str(out), mode="r+")
         for name, (data, _, _) in images.items():
             root[name]["0"][t] = data
-        check_input_unchanged(root.attrs.get(STAMP), t)
         root[DONE][t] = 1  # only after every chunk of the frame is on disk
     except OSError as e:
         raise os_error(e, Path(out)) from None
     return time.perf_counter() - t0
 
 
+def stamp_of(out) -> dict | None:
+    """The store's stamp (:data:`STAMP`), or None.
+
+    Parameters
+    ----------
+    out : str or Path
+
+    Returns
+    -------
+    dict or None
+    """
+    import zarr
+
+    try:
+        return zarr.open_group(str(out), mode="r").attrs.get(STAMP)
+    except OSError as e:
+        raise os_error(e, Path(out)) from None
+
+
 def check_input_unchanged(stamp, t: int) -> None:
-    """Refuse to mark frame ``t`` done when the store's input file changed since the run began.
+    """Refuse frame ``t``, just reconstructed, when the store's input file changed since the run
+    began (the frame would not be marked done).
 
     Cheap: the file's size, modification time and status-change time against the stamp's (its
     SHA-256 is taken once, when the store is opened). A file rewritten in place during a run

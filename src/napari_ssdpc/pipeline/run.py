@@ -1,7 +1,8 @@
 """The frame loop: one object takes a frame source and writes results to a sink.
 
 For every frame not yet done: read it, reconstruct it (the Reconstructor checks the frame once,
-extracts its views once and checks the result before anything is written), write it. The CLI, the
+extracts its views once and checks the result before anything is written), write it, in a thread
+beside the next frame's reconstruction. The CLI, the
 napari widgets, the benchmark and the Dask runner all go through :class:`Pipeline`. A source of
 unknown length (:class:`~.sources.LiveFrames`) is followed until it is finished.
 """
@@ -13,7 +14,7 @@ import re
 import time
 
 from napari_ssdpc.errors import Cancelled, SsdpcError
-from napari_ssdpc.pipeline.frame import RunReport, frame_bar, process_frame
+from napari_ssdpc.pipeline.frame import BackgroundWriter, RunReport, frame_bar, process_frame
 from napari_ssdpc.pipeline.job import Job
 from napari_ssdpc.pipeline.sinks import OutputGrid, Sink
 from napari_ssdpc.pipeline.sources import as_source, grows
@@ -89,8 +90,10 @@ class Pipeline:
         progress : bool, optional
             A tqdm bar of the frames on stderr (default: for series of more than one frame).
         on_frame : callable, optional
-            ``on_frame(t, done, total, result)`` after each frame is written (``total`` None
-            for a live source); raising there stops the run between frames.
+            ``on_frame(t, done, total, result)`` after each frame is reconstructed (``total`` None
+            for a live source), while it is written beside the next frame's reconstruction (the
+            store holds it when the next frame is reconstructed, or when the run returns);
+            raising there stops the run between frames.
         iteration_progress : callable, optional
             ``progress(done, total, label)`` within each frame.
         should_stop : callable, optional
@@ -142,6 +145,7 @@ class Pipeline:
         # a bounded live source may drop a frame the solver has not come to: claim it first
         claim = getattr(source, "claim", lambda t: True)
         limit = float("inf") if stop_after is None else int(stop_after)
+        writer = BackgroundWriter(sink)  # frame t is written while frame t + 1 is reconstructed
         try:
             while len(timings) < limit:
                 if should_stop is not None and should_stop():
@@ -162,6 +166,7 @@ class Pipeline:
                         warm=warm,
                         progress=iteration_progress,
                         should_stop=should_stop,
+                        writer=writer,
                     )
                     timings.append(timing)
                     warm = result.solution if warm_start else None
@@ -170,7 +175,9 @@ class Pipeline:
                         on_frame(t, len(done) + len(timings), total, result)
                 # else dropped by a bounded live source: the next frame starts from the last one solved
                 t += 1
+            writer.wait()
         finally:
+            writer.close()
             bar.close()
         frames = source.available()
         dropped = list(source.dropped()) if hasattr(source, "dropped") else []

@@ -21,7 +21,7 @@ import numpy as np
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.io.frames import write_ome_tiffs
 from napari_ssdpc.io.live_store import record_live_frames
-from napari_ssdpc.io.store import grow_store, open_store, write_frame
+from napari_ssdpc.io.store import check_input_unchanged, grow_store, open_store, stamp_of, write_frame
 from napari_ssdpc.io.store_lock import StoreLock
 from napari_ssdpc.pipeline.sources import grows
 from napari_ssdpc.settings.outputs import layout, parse_save
@@ -114,8 +114,20 @@ class Sink:
         """
         return self._open(job, grid, source)
 
+    def accept(self, t: int, result) -> None:
+        """Check frame ``t``'s result before it is written, in the loop's thread, right after it is
+        reconstructed (raises to stop the run; the frame is then not written).
+
+        Parameters
+        ----------
+        t : int
+            Frame index.
+        result : Result
+        """
+        self._accept(int(t), result)
+
     def write(self, t: int, result) -> float:
-        """Keep frame ``t``'s result.
+        """Keep frame ``t``'s result (accepted by :meth:`accept`; possibly in another thread).
 
         Parameters
         ----------
@@ -136,6 +148,9 @@ class Sink:
 
     def _open(self, job, grid, source) -> set[int]:
         return set()
+
+    def _accept(self, t: int, result) -> None:
+        pass
 
     def _write(self, t: int, result) -> float:
         raise NotImplementedError
@@ -243,6 +258,7 @@ class ZarrSink(Sink):
         self._digits: int | None = None
         self._digits_checked = False
         self._live = None  # a live source, whose kept and dropped frames are recorded at the end
+        self._stamp: dict | None = None
         if not self.out.parent.is_dir():
             raise SsdpcError(f"output folder does not exist: {self.out.parent} (create it first)")
         if self.out.exists() and not self.out.is_dir():
@@ -272,13 +288,19 @@ class ZarrSink(Sink):
             self._close()
             raise
         self._length = int(done.shape[0])
+        self._stamp = stamp_of(self.out)  # as stored (a resumed store keeps its own, updated by open_store)
         self._live = source if ident.get("live") else None
         return set(np.flatnonzero(done[:] == 1).tolist())
 
-    def _write(self, t, result) -> float:
+    def _accept(self, t, result) -> None:
+        if self._stamp is None:  # a Dask worker's sink is not opened: the stamp is the store's
+            self._stamp = stamp_of(self.out)
+        check_input_unchanged(self._stamp, t)  # the frame was read from the recording the store names
         if self._digits is not None and not self._digits_checked:
             self._digits_checked = True
             _check_digits(self._digits, result.delta_n)
+
+    def _write(self, t, result) -> float:
         if t >= self._length:  # a followed recording grew
             grow_store(self.out, t + 1)
             self._length = t + 1
