@@ -49,9 +49,9 @@ def main(argv=None) -> dict:
 
     import napari
     import useq
-    from camera_sim import core_with
     from qtpy.QtWidgets import QApplication
 
+    from camera_sim import core_with
     from napari_ssdpc._napari import sample_data
     from napari_ssdpc.validation.bench import machine
 

@@ -49,7 +49,7 @@ def test_a_store_keeps_the_digits_asked_for(stores, digits):
 def test_a_resume_with_other_digits_is_refused(stores):
     out, frames, (optics, cal, flat) = stores
     cfg = RunConfig(optics=optics, reconstruction=run_config(optics, **SETTINGS).reconstruction)
-    with pytest.raises(SsdpcError, match="other settings or outputs"):
+    with pytest.raises(SsdpcError, match="holds a reconstruction with other store digits; choose a new output path"):
         Pipeline(Job(cfg, cal, flat)).run(frames[:3], ZarrSink(out[5], ["phase"]), progress=False)
 
 

@@ -5,7 +5,7 @@ import pytest
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.reconstruction.fit_objects import fit_objects
-from napari_ssdpc.reconstruction.methods.multislice import medium_edge
+from napari_ssdpc.reconstruction.methods.multislice import medium_edge, object_support, unexplained_columns
 
 
 def _two_objects():
@@ -49,3 +49,26 @@ def test_two_objects_on_one_axis_are_two_objects_of_the_report():
         pytest.approx([9.5, 9.5, 21.5], abs=0.01),
     ]
     assert sum(o["dry_mass_pg"] for o in objects) == pytest.approx(dn.sum())  # every voxel given to one
+
+
+def test_the_objects_support_keeps_every_object_grown_by_its_margin_and_nothing_far_away():
+    dn = np.zeros((40, 20, 20))
+    dn[5:9, 8:12, 8:12] = 0.05  # below
+    dn[28:32, 8:12, 8:12] = 0.04  # above, on the same axis
+    dn[18, 9, 9] = 0.004  # haze between them, below the objects' level
+    support = object_support(dn, (1.0, 0.5, 0.5), 3.0)
+    assert support[5:9, 8:12, 8:12].all() and support[28:32, 8:12, 8:12].all()  # both objects
+    assert support[2, 10, 10] and support[11, 10, 10] and not support[12, 10, 10]  # 3 planes beyond, not 4
+    assert support[6, 8, 5] and not support[6, 8, 1]  # 1.5 µm aside, not 3.5
+    assert not support[18].any()  # the haze between them goes back to the medium
+    assert object_support(np.zeros((4, 5, 5)), (1.0, 0.5, 0.5), 3.0).all()  # no object: nothing held
+
+
+def test_the_columns_left_unexplained_are_those_the_data_still_ask_for():
+    misfit = np.full((30, 30), 2e-4)  # 2 x the noise variance: explained under a stop of 3
+    misfit[20:24, 5:9] = 1e-2  # an object held out of the support: its views are 100 x off
+    misfit[2, 2] = 2e-3  # one noisy pixel (20 x the noise variance) alone is not an object
+    cols = unexplained_columns(misfit, 0.01, 3.0, 0.5, 1.0)  # margin: 2 pixels
+    assert cols[20:24, 5:9].all() and cols[18, 7] and not cols[15, 7]
+    assert not cols[:10, :10].any()
+    assert not unexplained_columns(misfit, 0.0, 3.0, 0.5, 1.0).any()  # noise unknown: nothing said

@@ -84,10 +84,12 @@ def _check_resume(out: Path, old: dict, stamp: dict) -> None:
             f"now {_describe_input(new_in)}; write to a new output path, or delete {out} to start over"
         )
     rest = {k: v for k, v in stamp.items() if k != "input"}
-    if {k: old.get(k) for k in rest} != rest:
+    differ = [k for k in rest if old.get(k) != rest[k]]
+    if differ:
+        words = {"recipe": "settings", "store_digits": "store digits", "frame_shape": "frame size"}
         raise SsdpcError(
-            f"{out} holds a reconstruction with other settings or outputs; choose a new output path or delete "
-            "the old one to start over"
+            f"{out} holds a reconstruction with other {', '.join(words.get(k, k) for k in differ)}; choose a new "
+            "output path or delete the old one to start over"
         )
 
 

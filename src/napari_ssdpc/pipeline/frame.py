@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import sys
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 from napari_ssdpc.pipeline.sinks import Sink
@@ -63,7 +63,7 @@ class BackgroundWriter:
     def __init__(self, sink: Sink):
         self.sink = sink
         self._pool: ThreadPoolExecutor | None = None
-        self._pending = None  # (future, timing) of the frame being written
+        self._pending: tuple[Future, dict] | None = None  # (future, timing) of the frame being written
 
     def write(self, t: int, result, timing: dict) -> None:
         """Start writing frame ``t`` once the frame before it is written; ``timing['write_s']`` is

@@ -187,8 +187,8 @@ class Fit:
     unknowns : Unknowns
     lo, hi : float
         The bound of Δn (the sign constraint: one of them 0).
-    inside : ndarray, float32, (1, ny, nx) on the unknowns' grid
-        1 inside the field stop, 0 outside.
+    inside : ndarray, float32, (1, ny, nx) or (Z, ny, nx) on the unknowns' grid
+        1 where Δn is free (inside the field stop), 0 where it is held at the medium.
     mu : float
         Weight of TV_ε, (flat-field units)² per (Δn/µm).
     voxel_um : (float, float, float)

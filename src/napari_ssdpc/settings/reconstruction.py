@@ -239,6 +239,13 @@ class MultisliceSettings(SettingsModel):
         "rms error of the model's views relative to their contrast: the stop is raised by its share "
         "(model_error² x the views' mean squared contrast)",
     )
+    support_margin_um: float = bounded(
+        0.0,
+        0.0,
+        100.0,
+        "a second fit held to the first fit's objects grown by this margin, µm (their Δn elsewhere at the "
+        "medium); 0: none",
+    )
 
     @model_validator(mode="before")
     @classmethod

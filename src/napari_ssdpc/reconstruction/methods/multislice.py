@@ -39,7 +39,7 @@ import numpy as np
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.physics.multislice_source import square_roi
 from napari_ssdpc.physics.views_multislice import ViewsMultislice
-from napari_ssdpc.reconstruction.fit_objects import OBJECT_LEVEL, fit_objects
+from napari_ssdpc.reconstruction.fit_objects import OBJECT_LEVEL, fit_objects, object_labels
 from napari_ssdpc.reconstruction.memory import available_memory
 from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
 from napari_ssdpc.reconstruction.methods.tv import TvMethod
@@ -47,10 +47,12 @@ from napari_ssdpc.reconstruction.nonlinear import Fit, Unknowns, discrepancy_sto
 from napari_ssdpc.reconstruction.proximal import bounds
 from napari_ssdpc.reconstruction.regularised import TvState
 
-__all__ = ["MultisliceMethod", "medium_edge", "objects_roi"]
+__all__ = ["MultisliceMethod", "medium_edge", "object_support", "objects_roi", "unexplained_columns"]
 
 #: Stop when the relative change of Δn falls below this.
 TOLERANCE = 1e-3
+#: Fits held to the objects' support, each freeing the columns the one before left unexplained.
+SUPPORT_ROUNDS = 3
 
 
 def objects_roi(dn, x_um, y_um, margin_um: float, level: float = OBJECT_LEVEL):
@@ -77,6 +79,59 @@ def objects_roi(dn, x_um, y_um, margin_um: float, level: float = OBJECT_LEVEL):
     x0, x1, y0, y1 = x_um[ix.min()], x_um[ix.max()], y_um[iy.min()], y_um[iy.max()]
     side = max(x1 - x0, y1 - y0) + 2 * margin_um
     return square_roi(x_um, y_um, ((x0 + x1) / 2, (y0 + y1) / 2), side)
+
+
+def object_support(dn, voxel_um, margin_um: float) -> np.ndarray:
+    """Where a fit's objects are, grown by a margin: 1 within ``margin_um`` of an object voxel.
+
+    Parameters
+    ----------
+    dn : ndarray, (Z, ny, nx)
+        Δn of the region.
+    voxel_um : (float, float, float)
+        (dz, dy, dx), µm.
+    margin_um : float
+
+    Returns
+    -------
+    ndarray, bool, (Z, ny, nx)
+        All True when the fit has no object (nothing is held).
+    """
+    from scipy import ndimage
+
+    labels = object_labels(dn)
+    if not labels.any():
+        return np.ones(np.shape(dn), bool)
+    return ndimage.distance_transform_edt(labels == 0, sampling=voxel_um) <= margin_um
+
+
+def unexplained_columns(misfit, noise: float, stop: float, pixel_um: float, margin_um: float) -> np.ndarray:
+    """The pixels whose views a fit leaves unexplained, grown by a margin: there the data ask for Δn.
+
+    A pixel is unexplained when its mean squared residual over its 3 x 3 neighbourhood (all views)
+    exceeds twice the fit's stop (as for the objects of the report).
+
+    Parameters
+    ----------
+    misfit : ndarray, (ny, nx)
+        The squared residual per pixel, averaged over the views with data, (flat-field units)².
+    noise : float
+        The views' noise σ (0: unknown, nothing is unexplained).
+    stop : float
+        The fit's stop, residual over the noise variance.
+    pixel_um, margin_um : float
+
+    Returns
+    -------
+    ndarray, bool, (ny, nx)
+    """
+    from scipy import ndimage
+
+    if not noise > 0:
+        return np.zeros(np.shape(misfit), bool)
+    high = ndimage.uniform_filter(np.asarray(misfit, float), 3) > 2 * max(stop, 1.0) * noise**2
+    grow = max(int(round(margin_um / pixel_um)), 0)
+    return ndimage.binary_dilation(high, iterations=grow) if grow and high.any() else high
 
 
 def medium_edge(side: int, pixel_um: float, edge_um: float):
@@ -193,10 +248,10 @@ class MultisliceMethod(PhaseMethod):
             rows.stop - rows.start, px, ms.medium_edge_um
         )
 
-        def fit_on(model, fine: bool) -> Fit:
+        def fit_on(model, fine: bool, where=inside) -> Fit:
             k = ms.refine
             unknowns = Unknowns(1 if fine else k, bk.xp)
-            ins = np.repeat(np.repeat(inside, k, axis=1), k, axis=2) if fine else inside
+            ins = np.repeat(np.repeat(where, k, axis=1), k, axis=2) if fine else where
             voxel = (s.dz_um, px / k, px / k) if fine else (s.dz_um, px, px)
             mu = ms.tv_weight * noise
             return Fit(model, measured, weight, unknowns, lo, hi, bk.asarray(ins), mu, voxel)
@@ -256,6 +311,35 @@ class MultisliceMethod(PhaseMethod):
             label="multislice",
         )
         x = Unknowns(ms.refine, bk.xp).down(result.x) / ms.refine**2 if fine else result.x  # the views' grid
+        if ms.support_margin_um > 0 and not (should_stop is not None and should_stop()):
+            # a second fit held to the first one's objects (grown by the margin): the Δn the first
+            # fit spread elsewhere, at other depths, goes back to the medium unless the data need it
+            first_x, history = result.x, result.history
+            where = inside * object_support(bk.to_host(x), (s.dz_um, px, px), ms.support_margin_um)
+            for _ in range(SUPPORT_ROUNDS):
+                fit = fit_on(model, fine, where.astype(np.float32))
+                result = projected_gradient(
+                    fit,
+                    fit.project(result.x),
+                    iterations=ms.iterations,
+                    tolerance=TOLERANCE,
+                    enough=enough,
+                    progress=progress,
+                    should_stop=should_stop,
+                    label="multislice (objects)",
+                )
+                history = {k: history[k] + result.history[k] for k in history}
+                # where the views are still not explained, an object was held out: free its columns
+                res = fit.residual(result.x)
+                misfit = bk.to_host(bk.xp.sum(res * res, axis=0) / bk.xp.maximum(bk.xp.sum(weight, axis=0), 1.0))
+                held = unexplained_columns(misfit, noise, stop, px, ms.support_margin_um) & ~where.all(axis=0)
+                if not held.any() or (should_stop is not None and should_stop()):
+                    break
+                where[:, held] = inside[:, held]
+                free = bk.asarray(np.repeat(np.repeat(held, ms.refine, 0), ms.refine, 1) if fine else held)
+                result.x = bk.xp.where(free[None], first_x, result.x)  # those columns restart from the first fit
+            result.history = history
+            x = Unknowns(ms.refine, bk.xp).down(result.x) / ms.refine**2 if fine else result.x
         dn[:, rows, cols] = bk.to_host(x)
         out = report(fit, model, result.x, dn[:, rows, cols], result.history, result.converged)
         stopped = should_stop is not None and should_stop()
