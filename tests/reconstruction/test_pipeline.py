@@ -204,8 +204,21 @@ def test_multislice_refines_the_tv_solution_of_a_weak_bead(case, calibration, re
     more = {"iterations": 3, "stop_residual_over_noise": 0.0}
     config = run_config(case.optics, z=(-30, 30), dz=2, method="multislice", multislice=more)
     with pytest.warns(SsdpcWarning, match=r"did not converge in 3 iterations.*--multislice-iterations"):
-        pushed = Reconstructor(config, calibration, flat=case.flat).reconstruct(case.frame).settings
+        pushed_res = Reconstructor(config, calibration, flat=case.flat).reconstruct(case.frame)
+    pushed = pushed_res.settings
     assert pushed["multislice_iterations_run"] == 3 and not pushed["multislice_converged"]
+    # then held to its objects grown by 3 µm: the bead stays, the Δn spread elsewhere goes back to the medium
+    config = run_config(
+        case.optics, z=(-30, 30), dz=2, method="multislice", multislice={**more, "support_margin_um": 3.0}
+    )
+    with pytest.warns(SsdpcWarning, match="did not converge"):
+        held = Reconstructor(config, calibration, flat=case.flat).reconstruct(case.frame)
+    assert held.settings["multislice_iterations_run"] > 3
+    assert opd(held) == pytest.approx(opd(pushed_res), rel=0.25)
+    r0, r1, c0, c1 = pushed["multislice_roi_px"]
+    assert held.settings["multislice_roi_px"] == pushed["multislice_roi_px"]
+    spread = [np.count_nonzero(r.delta_n[:, r0:r1, c0:c1]) for r in (pushed_res, held)]
+    assert spread[1] < 0.5 * spread[0], spread
     assert pushed["multislice_objective_final"] < pushed["multislice_objective_start"]
     # the unknowns on the model's finer grid: the same descent, the result back on the views' grid
     config = run_config(case.optics, z=(-30, 30), dz=2, method="multislice", multislice={**more, "unknowns": "model"})

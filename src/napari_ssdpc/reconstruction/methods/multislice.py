@@ -256,11 +256,15 @@ class MultisliceMethod(PhaseMethod):
             mu = ms.tv_weight * noise
             return Fit(model, measured, weight, unknowns, lo, hi, bk.asarray(ins), mu, voxel)
 
+        def misfit_map(res) -> np.ndarray:
+            """The squared residual per pixel of the region, averaged over the views with data, (ny, nx)."""
+            return bk.to_host(bk.xp.sum(res * res, axis=0) / bk.xp.maximum(bk.xp.sum(weight, axis=0), 1.0))
+
         def report(fit: Fit, model: ViewsMultislice, x, on_views, history, converged):
             """The report of the fit ending at x (on its unknowns' grid; ``on_views``: on the views')."""
             res = fit.residual(x)
             sq = float(bk.xp.sum(res * res))
-            per_pixel = bk.to_host(bk.xp.sum(res * res, axis=0) / bk.xp.maximum(bk.xp.sum(weight, axis=0), 1.0))
+            per_pixel = misfit_map(res)
             objects = fit_objects(
                 on_views,
                 per_pixel,
@@ -298,18 +302,22 @@ class MultisliceMethod(PhaseMethod):
         if f0 <= enough:
             kept = report(coarse, model, x0, bk.to_host(x0), {"objective": [f0], "relative_change": []}, True)
             return Solution(start.phase, kept, {**start.history, "multislice": {"objective": [f0]}}, state=start.state)
+
+        def fitted(fit: Fit, start, label: str):
+            return projected_gradient(
+                fit,
+                start,
+                iterations=ms.iterations,
+                tolerance=TOLERANCE,
+                enough=enough,
+                progress=progress,
+                should_stop=should_stop,
+                label=label,
+            )
+
         fine = ms.unknowns == "model"  # sub-pixel edges: each view pixel's k x k model samples are free
         fit = fit_on(model, fine)
-        result = projected_gradient(
-            fit,
-            Unknowns(ms.refine, bk.xp).up(x0) if fine else x0,
-            iterations=ms.iterations,
-            tolerance=TOLERANCE,
-            enough=enough,
-            progress=progress,
-            should_stop=should_stop,
-            label="multislice",
-        )
+        result = fitted(fit, Unknowns(ms.refine, bk.xp).up(x0) if fine else x0, "multislice")
         x = Unknowns(ms.refine, bk.xp).down(result.x) / ms.refine**2 if fine else result.x  # the views' grid
         if ms.support_margin_um > 0 and not (should_stop is not None and should_stop()):
             # a second fit held to the first one's objects (grown by the margin): the Δn the first
@@ -318,20 +326,10 @@ class MultisliceMethod(PhaseMethod):
             where = inside * object_support(bk.to_host(x), (s.dz_um, px, px), ms.support_margin_um)
             for _ in range(SUPPORT_ROUNDS):
                 fit = fit_on(model, fine, where.astype(np.float32))
-                result = projected_gradient(
-                    fit,
-                    fit.project(result.x),
-                    iterations=ms.iterations,
-                    tolerance=TOLERANCE,
-                    enough=enough,
-                    progress=progress,
-                    should_stop=should_stop,
-                    label="multislice (objects)",
-                )
+                result = fitted(fit, fit.project(result.x), "multislice (objects)")
                 history = {k: history[k] + result.history[k] for k in history}
                 # where the views are still not explained, an object was held out: free its columns
-                res = fit.residual(result.x)
-                misfit = bk.to_host(bk.xp.sum(res * res, axis=0) / bk.xp.maximum(bk.xp.sum(weight, axis=0), 1.0))
+                misfit = misfit_map(fit.residual(result.x))
                 held = unexplained_columns(misfit, noise, stop, px, ms.support_margin_um) & ~where.all(axis=0)
                 if not held.any() or (should_stop is not None and should_stop()):
                     break
