@@ -76,9 +76,10 @@ def main(argv=None) -> dict:
         d = Path(tmp)
         tifffile.imwrite(d / "raw.tif", case.frame)
         tifffile.imwrite(d / "flat.tif", case.flat)
-        calibrate(case.white, o).save(d / "calibration.json")
+        calibrate(case.white, o).to_json(d / "calibration.json")
         planes = int(round(Z_UM[1] - Z_UM[0])) + 1
-        ours = [sys.executable, "-m", "napari_ssdpc.cli.entry", "reconstruct", str(d / "raw.tif")]
+        ssdpc = "import sys; from napari_ssdpc.cli.entry import run; sys.exit(run())"  # the `ssdpc` command
+        ours = [sys.executable, "-c", ssdpc, "reconstruct", str(d / "raw.tif")]
         ours += ["--calibration", str(d / "calibration.json"), "--flat", str(d / "flat.tif")]
         ours += ["--z", str(Z_UM[0]), str(Z_UM[1]), "--overwrite"]
         (d / "waveorder_phase.py").write_text(WAVEORDER)
