@@ -8,7 +8,7 @@ import types
 import numpy as np
 import pytest
 
-from napari_ssdpc import backend
+from napari_ssdpc import backend, blas
 from napari_ssdpc.backend import get_backend, gpu_available
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.geometry import nominal_lenslets
@@ -87,18 +87,17 @@ def test_products_run_on_one_blas_thread_and_give_the_threads_back():
     with threadpool_limits(3, user_api="blas"):  # as on a 3-core machine
         if not _blas_threads():
             pytest.skip("no BLAS library that threadpoolctl can steer")
-        hold = backend.one_blas_thread()
-        with hold:
+        with blas.one_blas_thread:
             assert set(_blas_threads()) == {1}
-            with backend.one_blas_thread():  # nested: one shared hold
+            with blas.one_blas_thread:  # nested: one shared hold
                 assert set(_blas_threads()) == {1}
             assert set(_blas_threads()) == {1}
-            inside = threading.Thread(target=lambda: np.testing.assert_array_equal(backend.matmul(a, b), a @ b))
+            inside = threading.Thread(target=lambda: np.testing.assert_array_equal(blas.matmul(a, b), a @ b))
             inside.start()
             inside.join()  # a concurrent holder leaving does not end this one
             assert set(_blas_threads()) == {1}
         assert set(_blas_threads()) == {3}  # the last holder out restores them
-        np.testing.assert_allclose(backend.matmul(a, b), a @ b, rtol=1e-5)
+        np.testing.assert_allclose(blas.matmul(a, b), a @ b, rtol=1e-5)
         assert set(_blas_threads()) == {3}
 
 

@@ -18,7 +18,6 @@ from __future__ import annotations
 import functools
 import importlib
 import os
-import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
@@ -35,8 +34,6 @@ __all__ = [
     "get_backend",
     "gpu_available",
     "in_threads",
-    "matmul",
-    "one_blas_thread",
 ]
 
 DEVICES = ("cpu", "gpu")
@@ -353,75 +350,3 @@ def in_threads(fn, n: int) -> list:
     if parts == 1:
         return [fn(slices[0])]
     return list(_pool(parts).map(fn, slices))
-
-
-class _OneBlasThread:
-    """While any holder is inside, the BLAS libraries (OpenBLAS, MKL) run on one thread.
-
-    Counted, so that nested and concurrent holders (a series' worker threads) share one limit and
-    the last one out restores the threads the process had.
-    """
-
-    def __init__(self):
-        self._lock = threading.Lock()
-        self._holders = 0
-        self._limiter: Any = None
-
-    def __enter__(self):
-        with self._lock:
-            if self._holders == 0:
-                self._limiter = _blas().limit(limits=1, user_api="blas")
-            self._holders += 1
-        return self
-
-    def __exit__(self, *exc):
-        with self._lock:
-            self._holders -= 1
-            if self._holders == 0:
-                self._limiter.restore_original_limits()
-                self._limiter = None
-
-
-@functools.cache
-def _blas():
-    from threadpoolctl import ThreadpoolController
-
-    return ThreadpoolController()
-
-
-_HELD = _OneBlasThread()
-
-
-def one_blas_thread() -> _OneBlasThread:
-    """The process's hold on BLAS: ``with one_blas_thread(): ...`` runs the block's matrix products
-    and inverses on one BLAS thread (see :func:`matmul`); the threads come back when the last
-    holder leaves.
-
-    Returns
-    -------
-    context manager
-    """
-    return _HELD
-
-
-def matmul(a, b):
-    """``a @ b``, batched over the leading axes; on the CPU with BLAS held to one thread.
-
-    The products of the solvers are many small matrices, one per band frequency (views x planes,
-    16-24 x 100-300). Beyond a size (about 16 x 270 complex64) OpenBLAS splits each one over its
-    threads, which costs far more than it gives: 6000 products of 16 x 285 took 14.5 s on 2 busy
-    cores against 44 ms on one thread (docs/performance.md). FFTs keep every core.
-
-    Parameters
-    ----------
-    a : ndarray (NumPy or CuPy), (..., M, N)
-    b : ndarray (same module), (..., N, L)
-
-    Returns
-    -------
-    ndarray, (..., M, L)
-    """
-    if isinstance(a, np.ndarray):
-        with _HELD:
-            return a @ b
-    return a @ b  # CuPy: cuBLAS

@@ -55,8 +55,17 @@ def _describe_input(ident) -> str:
     )
 
 
-def _read_stamp(out: Path):
-    """The stamp of an existing store, or None when the folder holds no store of ours."""
+def stamp_of(out):
+    """The stamp (:data:`STAMP`) of an existing store, or None when the folder holds no store of ours.
+
+    Parameters
+    ----------
+    out : str or Path
+
+    Returns
+    -------
+    dict or None
+    """
     import zarr
 
     try:
@@ -164,7 +173,7 @@ def open_store(out, n_frames: int, layout: dict, voxel, stamp: dict, attrs: dict
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise SsdpcError(f"{out} exists and is a file, not an OME-Zarr folder; choose a new output path")
-    old = _read_stamp(out) if out.exists() else None
+    old = stamp_of(out) if out.exists() else None
     if old is None:
         if out.exists() and any(out.iterdir()) and not _killed_creation(out):
             raise SsdpcError(f"{out} exists and was not written by `ssdpc reconstruct`; choose a new output path")
@@ -221,25 +230,6 @@ def write_frame(out, t: int, images: dict) -> float:
     except OSError as e:
         raise os_error(e, Path(out)) from None
     return time.perf_counter() - t0
-
-
-def stamp_of(out) -> dict | None:
-    """The store's stamp (:data:`STAMP`), or None.
-
-    Parameters
-    ----------
-    out : str or Path
-
-    Returns
-    -------
-    dict or None
-    """
-    import zarr
-
-    try:
-        return zarr.open_group(str(out), mode="r").attrs.get(STAMP)
-    except OSError as e:
-        raise os_error(e, Path(out)) from None
 
 
 def check_input_unchanged(stamp, t: int) -> None:

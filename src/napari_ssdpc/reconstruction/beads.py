@@ -61,7 +61,7 @@ from napari_ssdpc.reconstruction.bead_search import (
     wave_neighbours,
 )
 from napari_ssdpc.reconstruction.dpc import phase_to_delta_n
-from napari_ssdpc.reconstruction.fit_objects import around_bead, bead_candidates, voxel_steps
+from napari_ssdpc.reconstruction.fit_objects import around_bead, bead_candidates, explained_limit, voxel_steps
 from napari_ssdpc.reconstruction.nonlinear import discrepancy_stop
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.settings.reconstruction import MultisliceSettings
@@ -297,7 +297,7 @@ def _report(region: BeadRegion, spheres, converged: bool, noise: float, optics, 
         foot = np.hypot(region.x_um[None, :] - x, region.y_um[:, None] - y) <= reach
         ratio = float(per_pixel[foot].mean()) / noise**2 if foot.any() else None
         stop = discrepancy_stop(settings, float(contrast_map[foot].mean()), noise)
-        explained = ratio is not None and ratio <= 2 * max(stop, 1.0)
+        explained = ratio is not None and ratio <= explained_limit(stop)
         notes = [] if converged else ["the fit did not converge"]
         if abs(dn) >= 0.99 * DN_LIMIT or r <= 1.01 * MIN_RADIUS_PX * m.dx:
             notes.append("the fit ended on a bound of its Δn or radius (no bead of this frame fits as a sphere)")

@@ -21,7 +21,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.fft as sfft
 
-from napari_ssdpc.backend import cpu, get_backend, matmul
+from napari_ssdpc.backend import cpu, get_backend
+from napari_ssdpc.blas import matmul
 from napari_ssdpc.errors import SsdpcError
 
 

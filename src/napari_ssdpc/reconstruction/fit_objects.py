@@ -14,6 +14,7 @@ __all__ = [
     "OBJECT_LEVEL",
     "around_bead",
     "bead_candidates",
+    "explained_limit",
     "fit_objects",
     "object_labels",
     "voxel_steps",
@@ -24,6 +25,22 @@ __all__ = [
 OBJECT_LEVEL = 0.15
 #: Fewer voxels than this above the level are not an object of the fit's report.
 MIN_VOXELS = 8
+
+
+def explained_limit(stop: float) -> float:
+    """The residual over the noise variance beyond which the views of an object (or a pixel) are not
+    explained: twice the fit's stop, or twice the noise for a stop below 1.
+
+    Parameters
+    ----------
+    stop : float
+        The fit's stop, residual over the noise variance.
+
+    Returns
+    -------
+    float
+    """
+    return 2 * max(stop, 1.0)
 
 
 def voxel_steps(z_um, y_um, x_um) -> tuple[float, float, float]:
@@ -114,7 +131,7 @@ def fit_objects(dn, misfit_map, z_um, y_um, x_um, *, noise: float, alpha_um3_pg:
                 "centre_um": [float(g[own] @ w / w.sum()) for g in (xx, yy, zz)],
                 "dry_mass_pg": float(dn[own].sum() * np.prod(voxel) / alpha_um3_pg),
                 "residual_over_noise": ratio,
-                "explained": ratio is None or (math.isfinite(ratio) and ratio <= 2 * max(stop, 1.0)),
+                "explained": ratio is None or (math.isfinite(ratio) and ratio <= explained_limit(stop)),
             }
         )
     return sorted(out, key=lambda o: -abs(o["dry_mass_pg"]))

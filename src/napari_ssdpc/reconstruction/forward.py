@@ -28,7 +28,8 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 import scipy.fft as sfft
 
-from napari_ssdpc.backend import Backend, get_backend, matmul
+from napari_ssdpc.backend import Backend, get_backend
+from napari_ssdpc.blas import matmul
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics import transfer
 from napari_ssdpc.reconstruction.deconvolution import Band

@@ -43,7 +43,8 @@ from typing import Any
 import numpy as np
 import scipy.fft as sfft
 
-from napari_ssdpc.backend import in_threads, matmul, one_blas_thread
+from napari_ssdpc.backend import in_threads
+from napari_ssdpc.blas import one_blas_thread
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.reconstruction.forward import ViewModel, apply
 from napari_ssdpc.reconstruction.proximal import bounds, constraint_step, gradient_step
@@ -139,8 +140,8 @@ class TvInversion:
         self.b = bk.asarray((self.rho * (1.0 + dtd)).astype(np.float32))  # (kz, ny, nx//2+1)
         self.binv_band = xp.ascontiguousarray(1.0 / model.take(self.b))  # (P, kz)
         # per band frequency G⁻¹ = (I + Â b⁻¹ Âᴴ)⁻¹ (K x K), for the Woodbury identity
-        with one_blas_thread():
-            g = matmul(self.ah * self.binv_band[:, None, :], self.ah_h)
+        with one_blas_thread:  # many small products and inverses (see napari_ssdpc.blas)
+            g = (self.ah * self.binv_band[:, None, :]) @ self.ah_h
             g += xp.eye(model.n_views, dtype=g.dtype)
             self.ginv = xp.linalg.inv(g).astype(np.complex64)
         outside = np.ones(dtd.shape[1:], bool)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from napari_ssdpc.backend import matmul, one_blas_thread
+from napari_ssdpc.blas import one_blas_thread
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.reconstruction.forward import ViewModel, apply
 
@@ -40,14 +40,14 @@ class WotfInversion:
         xp = model.bk.xp  # NumPy or CuPy: the model's device
         a = model.a
         a_h = xp.ascontiguousarray(xp.conj(a).transpose(0, 2, 1))  # (P, Z, K)
-        gram = matmul(a, a_h)  # (P, K, K)
         k = model.n_views
-        scale = float(xp.max(xp.real(xp.trace(gram, axis1=1, axis2=2)))) / k
         self.alpha = float(alpha)
-        self.alpha_abs = self.alpha * scale
-        with one_blas_thread():
+        with one_blas_thread:  # many small products and inverses (see napari_ssdpc.blas)
+            gram = a @ a_h  # (P, K, K)
+            scale = float(xp.max(xp.real(xp.trace(gram, axis1=1, axis2=2)))) / k
+            self.alpha_abs = self.alpha * scale
             inv = xp.linalg.inv(gram + self.alpha_abs * xp.eye(k, dtype=np.complex64))
-        self.inverse = matmul(a_h, inv).astype(np.complex64)  # (P, Z, K)
+            self.inverse = (a_h @ inv).astype(np.complex64)  # (P, Z, K)
 
     def phase(self, contrast) -> np.ndarray:
         """Phase per slab, (Z, ny, nx) float32 rad, from the views' contrast (K, ny, nx).

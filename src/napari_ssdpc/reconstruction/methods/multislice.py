@@ -39,7 +39,7 @@ import numpy as np
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.physics.multislice_source import square_roi
 from napari_ssdpc.physics.views_multislice import ViewsMultislice
-from napari_ssdpc.reconstruction.fit_objects import OBJECT_LEVEL, fit_objects, object_labels
+from napari_ssdpc.reconstruction.fit_objects import OBJECT_LEVEL, explained_limit, fit_objects, object_labels
 from napari_ssdpc.reconstruction.memory import available_memory
 from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
 from napari_ssdpc.reconstruction.methods.tv import TvMethod
@@ -129,7 +129,7 @@ def unexplained_columns(misfit, noise: float, stop: float, pixel_um: float, marg
 
     if not noise > 0:
         return np.zeros(np.shape(misfit), bool)
-    high = ndimage.uniform_filter(np.asarray(misfit, float), 3) > 2 * max(stop, 1.0) * noise**2
+    high = ndimage.uniform_filter(np.asarray(misfit, float), 3) > explained_limit(stop) * noise**2
     grow = max(int(round(margin_um / pixel_um)), 0)
     return ndimage.binary_dilation(high, iterations=grow) if grow and high.any() else high
 
