@@ -46,6 +46,19 @@ def test_the_plugins_menu_holds_the_dock_and_the_measurements_only():
     assert names == ["ssDPC", "Objects over time", "Beads (each fitted as a sphere)"]
 
 
+def test_every_dock_of_the_plugin_open_at_once_fits_a_laptop_screen(make_napari_viewer, qtbot):
+    """The ssDPC dock, Objects over time and Beads open together: the docks scroll, the window
+    stays within a 1280 x 800 screen (the objects' table and plots made it 989 px tall)."""
+    viewer = make_napari_viewer(show=True)
+    window = viewer.window._qt_window
+    window.resize(1280, 800)
+    for name in ("ssDPC", "Objects over time", "Beads (each fitted as a sphere)"):
+        viewer.window.add_plugin_dock_widget("napari-ssdpc", name)
+        qtbot.wait(100)
+        size = window.size()
+        assert (size.width(), size.height()) == (1280, 800), (name, size.width(), size.height())
+
+
 def test_the_dock_and_widgets_made_by_a_script_share_one_session_and_reach_an_ri_volume(
     make_napari_viewer, qtbot, monkeypatch
 ):
@@ -103,6 +116,8 @@ def test_the_ssdpc_dock_runs_the_workflow_and_fits_a_laptop_screen(make_napari_v
     assert (size.width(), size.height()) == FIRST_WINDOW  # the dock fits: the window did not grow
     canvas = viewer.window._qt_viewer.canvas.native.width()
     assert dock.width() <= DOCK_WIDTH_PX + 20 and canvas >= 450, (dock.width(), canvas)  # was 430 and 362
+    bar = dock.tab_widget.tabBar()  # every step in view (a 300 px strip on top hid 3 of the 7)
+    assert all(bar.rect().contains(bar.tabRect(i)) for i in range(bar.count())), [bar.tabRect(i) for i in range(7)]
     frame, flat, white, optics = _sample_data.bead_frames()
     _steps.prepare_bead(viewer, qtbot, w, optics, Z, DZ)
     w["operators"].sign.value, w["operators"].tv_iterations.value = "lighter", 25

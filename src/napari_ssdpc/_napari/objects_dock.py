@@ -14,6 +14,7 @@ from qtpy.QtWidgets import QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget
 
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.tracks import measure_layer, tracks_layer
+from napari_ssdpc._napari.widgets.common import scrolling
 from napari_ssdpc.analysis.objects import DEFAULT_RULE, ObjectRule
 from napari_ssdpc.analysis.table import write_csv
 from napari_ssdpc.analysis.tracks import DEFAULT_MAX_STEP_UM
@@ -93,10 +94,12 @@ class ObjectsDock(QWidget):
         self.canvas.setMinimumHeight(260)
         self.table = QTableWidget(0, len(SHOWN))
         self.table.setHorizontalHeaderLabels(list(SHOWN))
-        column = QVBoxLayout(self)
+        inner = QWidget()
+        column = QVBoxLayout(inner)
         column.addWidget(self.controls.native)
         column.addWidget(self.canvas)
         column.addWidget(self.table)
+        scrolling(inner, into=self)  # it scrolls: with every dock open the window still fits the screen
         for e in (napari_viewer.layers.events.inserted, napari_viewer.layers.events.removed):
             e.connect(lambda *_: self.controls.reset_choices())
 

@@ -17,11 +17,11 @@ from pathlib import Path
 
 import numpy as np
 from magicgui.widgets import Container, FileEdit, Label, PushButton
-from qtpy.QtWidgets import QScrollArea, QVBoxLayout, QWidget
+from qtpy.QtWidgets import QVBoxLayout, QWidget
 
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.widgets.choices import LayerChoice, result_layer_choices
-from napari_ssdpc._napari.widgets.common import MIN_DOCK_HEIGHT_PX
+from napari_ssdpc._napari.widgets.common import scrolling
 from napari_ssdpc._napari.widgets.plot import LazyFigure
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.files import atomic_write
@@ -152,13 +152,7 @@ class ProfileWidget(QWidget):
         column.addWidget(self.controls.native)
         self.plot = LazyFigure(column, (4, 3), 220)  # made with the first profile drawn
         self._axes = None
-        area = QScrollArea()  # the dock may be short (a laptop screen, other docks open): scroll
-        area.setWidgetResizable(True)
-        area.setWidget(inner)
-        area.setMinimumHeight(MIN_DOCK_HEIGHT_PX)
-        layout = QVBoxLayout(self)
-        layout.setContentsMargins(0, 0, 0, 0)
-        layout.addWidget(area)
+        scrolling(inner, into=self)  # the dock may be short (a laptop screen, other docks open)
         self.profiles: list[dict] = []
         self._connected = []
         ev = napari_viewer.layers.events

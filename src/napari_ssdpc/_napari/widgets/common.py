@@ -18,6 +18,7 @@ MIN_DOCK_HEIGHT_PX = 80
 
 __all__ = [
     "MIN_DOCK_HEIGHT_PX",
+    "scrolling",
     "StepWidget",
     "compact",
     "catching_warnings",
@@ -198,6 +199,34 @@ def wrap(label: Label) -> Label:
     # its long lines never set the dock's width: it takes the width there is and wraps
     label.native.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
     return label
+
+
+def scrolling(widget, into=None):
+    """``widget`` in a scroll area that can shrink to :data:`MIN_DOCK_HEIGHT_PX`: a dock scrolls
+    instead of making the window taller than the screen (a laptop, other docks open).
+
+    Parameters
+    ----------
+    widget : QWidget
+        The content.
+    into : QWidget, optional
+        Also make the scroll area the whole of this widget (its only child, no margins).
+
+    Returns
+    -------
+    QScrollArea
+    """
+    from qtpy.QtWidgets import QScrollArea, QVBoxLayout
+
+    area = QScrollArea()
+    area.setWidgetResizable(True)
+    area.setWidget(widget)
+    area.setMinimumHeight(MIN_DOCK_HEIGHT_PX)
+    if into is not None:
+        layout = QVBoxLayout(into)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.addWidget(area)
+    return area
 
 
 def compact(container: Container) -> Container:

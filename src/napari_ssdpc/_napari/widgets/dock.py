@@ -14,13 +14,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from qtpy.QtCore import QSize, QTimer
-from qtpy.QtWidgets import QFileDialog, QHBoxLayout, QMenu, QPushButton, QScrollArea, QTabWidget, QVBoxLayout, QWidget
+from qtpy.QtWidgets import QFileDialog, QHBoxLayout, QMenu, QPushButton, QTabWidget, QVBoxLayout, QWidget
 
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.placement import place_frames
 from napari_ssdpc._napari.profiles import ProfileWidget
 from napari_ssdpc._napari.widgets.calibrate import CalibrateWidget
-from napari_ssdpc._napari.widgets.common import MIN_DOCK_HEIGHT_PX
+from napari_ssdpc._napari.widgets.common import scrolling
 from napari_ssdpc._napari.widgets.movie import MovieWidget
 from napari_ssdpc._napari.widgets.operators import OperatorsWidget
 from napari_ssdpc._napari.widgets.optics import OpticsWidget
@@ -49,14 +49,6 @@ TABS = (
 )
 
 
-def _scrolling(widget: QWidget) -> QScrollArea:
-    area = QScrollArea()
-    area.setWidgetResizable(True)
-    area.setWidget(widget)
-    area.setMinimumHeight(MIN_DOCK_HEIGHT_PX)
-    return area
-
-
 class SsdpcDock(QWidget):
     """One dock for the workflow: optics → calibrate → method → reconstruct → profile.
 
@@ -80,8 +72,9 @@ class SsdpcDock(QWidget):
         self.tabs = {title: cls(napari_viewer) for title, cls in TABS}
         self.tab_widget = QTabWidget()
         self.tab_widget.setUsesScrollButtons(True)
+        self.tab_widget.setTabPosition(QTabWidget.TabPosition.West)  # all seven tabs in view, in the workflow order
         for title, w in self.tabs.items():  # the magicgui steps scroll themselves
-            page = w.root_native_widget if hasattr(w, "native") else _scrolling(w)
+            page = w.root_native_widget if hasattr(w, "native") else scrolling(w)
             page.setMinimumWidth(DOCK_MIN_WIDTH_PX - 10)  # narrower than its content: it scrolls sideways
             self.tab_widget.addTab(page, title)
         buttons = QHBoxLayout()
