@@ -74,10 +74,27 @@ def test_a_result_opened_from_a_file_is_brought_into_view_in_um(make_napari_view
     [layer] = viewer.open(path, plugin="napari-ssdpc")
     assert not any(viewer.layers[n].visible for n in ("PMMA bead", "PMMA bead flat", "PMMA bead white"))
     assert layer.visible and scale_bar(viewer).visible
+    assert scale_bar(viewer).position == "bottom_left"  # not under the notifications (bottom right)
     assert {str(u) for lyr in viewer.layers for u in lyr.units[-2:]} == {"micrometer"}
     # the view was fitted to the volume (123 µm wide), not left on the 866 µm frames
     assert _camera(viewer).zoom == pytest.approx(_fitted_zoom(viewer, layer), rel=1e-3)
     assert layer.metadata["ssdpc"]["axial_fwhm_um"] == pytest.approx(axial_fwhm_um(optics))
+    # the status bar reads the RI to 4 decimals under the cursor (napari's 3 digits gave 1.5)
+    centre = (0.0, 0.0, 0.0)
+    status = layer.get_status(centre, world=True)
+    truth = float(layer.data[tuple(np.round(layer.world_to_data(centre)).astype(int))])
+    assert status["value"] == f"{truth:.4f}" and truth < MEDIUM - 0.015, (status, truth)
+    assert status["coordinates"].endswith(f": {truth:.4f}")
+
+
+def test_a_sample_opened_beside_other_layers_is_fitted_to_the_view(make_napari_viewer):
+    """napari fits the view to a viewer's first layers only: the bead sample opened after a large
+    image was left far off view."""
+    viewer = make_napari_viewer()
+    viewer.add_image(np.zeros((64, 64), np.float32), scale=(200.0, 200.0), name="a large field")  # 12.8 mm
+    [*_, bead] = viewer.open_sample("napari-ssdpc", "pmma_bead")
+    assert bead.name == "PMMA bead"
+    assert _camera(viewer).zoom == pytest.approx(_fitted_zoom(viewer, bead), rel=1e-3)
 
 
 def _fitted_zoom(viewer, layer):

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import weakref
 
+import numpy as np
+
 from napari_ssdpc.settings.optics import Optics
 
 __all__ = [
@@ -20,6 +22,7 @@ __all__ = [
     "follow_results",
     "frame_transform",
     "place_frames",
+    "precise_status",
     "scale_bar",
     "show_first_result",
 ]
@@ -148,7 +151,9 @@ def show_first_result(viewer, layer) -> None:
         ):
             lyr.visible = False
     fit_view(viewer, layer)
-    scale_bar(viewer).visible = True  # every shown layer is in µm: the bar reads µm
+    bar = scale_bar(viewer)
+    bar.visible = True  # every shown layer is in µm: the bar reads µm
+    bar.position = "bottom_left"  # napari's notifications pop up over the bottom right
 
 
 def fit_view(viewer, layer) -> None:
@@ -191,6 +196,7 @@ def follow_results(viewer=None) -> None:
         v, layer = ref(), event.value
         if v is None or not _is_result(layer):
             return
+        precise_status(layer)
         if not any(_is_result(lyr) for lyr in v.layers if lyr is not layer):
             show_first_result(v, layer)
 
@@ -198,3 +204,36 @@ def follow_results(viewer=None) -> None:
 
 
 _FOLLOWED: set[int] = set()  # ids of the viewers whose results are followed
+
+
+def precise_status(layer) -> None:
+    """Show the value under the cursor in the status bar with its quantity's decimals (an RI as
+    1.4952, where napari's three significant digits give 1.5).
+
+    Parameters
+    ----------
+    layer : napari Image layer
+        A result layer (``metadata['ssdpc']['quantity']``); left as it is when its quantity has no
+        ``decimals``.
+    """
+    from napari_ssdpc.settings.outputs import QUANTITIES
+
+    quantity = QUANTITIES.get(layer.metadata.get("ssdpc", {}).get("quantity", ""))
+    if quantity is None or quantity.decimals is None or getattr(layer, "_ssdpc_status", False):
+        return
+    napari_status = layer.get_status
+
+    def get_status(position=None, *, view_direction=None, dims_displayed=None, world=False, **kwargs):
+        status = napari_status(
+            position, view_direction=view_direction, dims_displayed=dims_displayed, world=world, **kwargs
+        )
+        if position is None:
+            return status
+        value = layer.get_value(position, view_direction=view_direction, dims_displayed=dims_displayed, world=world)
+        if isinstance(value, (float, np.floating)) and np.isfinite(value):
+            status["value"] = f"{value:.{quantity.decimals}f}"
+            status["coordinates"] = f"{status['coords']}: {status['value']}"
+        return status
+
+    layer.get_status = get_status
+    layer._ssdpc_status = True

@@ -31,13 +31,14 @@ from pathlib import Path
 import numpy as np
 
 from napari_ssdpc import __version__
-from napari_ssdpc._napari.placement import frame_transform
+from napari_ssdpc._napari.placement import fit_view, frame_transform
 
 #: Sample frames shipped with the package (``ship_bead_frames``): the bead opens at once.
 SHIPPED = Path(__file__).parent / "data"
 #: The bead sample's camera region of interest (px): the whole objective pupil (radius 435 px) fits.
 BEAD_ROI_PX = 1024
 SERIES_FRAMES = 20
+SOURCE = "napari-ssdpc simulator"  # the samples' frames say where they come from
 STALE_PART_S = 600.0  # an unfinished cache file older than this was left by an exit
 SERIES_SOURCE_STEP = 4  # reduced-cost source sampling of the time series (see module doc)
 
@@ -102,7 +103,7 @@ def _optics_meta(optics, name: str) -> dict:
             "kind": "raw",
             "optics": optics.to_dict(),
             "optics_yaml": str(path),
-            "source": "napari-ssdpc simulator",
+            "source": SOURCE,
         }
     }
 
@@ -110,6 +111,24 @@ def _optics_meta(optics, name: str) -> dict:
 def _role(meta: dict, frame: str) -> dict:
     """A layer's own copy of the sample's metadata, with what the frame is ('raw', 'flat', 'white')."""
     return {"ssdpc": {**meta["ssdpc"], "frame": frame}}
+
+
+def _fit_view_on_arrival() -> None:
+    """Fit the current viewer's view to the sample's raw frame when napari adds it (napari fits
+    the view to the first layers of a viewer only: a sample opened beside others was left off view)."""
+    import napari
+
+    viewer = napari.current_viewer()
+    if viewer is None:
+        return
+
+    def inserted(event):
+        info = event.value.metadata.get("ssdpc", {})
+        if info.get("frame") == "raw" and info.get("source") == SOURCE:
+            viewer.layers.events.inserted.disconnect(inserted)
+            fit_view(viewer, event.value)
+
+    viewer.layers.events.inserted.connect(inserted)
 
 
 def _contrast(frame) -> list[float]:
@@ -183,6 +202,7 @@ def pmma_bead_sample():
     """The paper's PMMA bead (13 µm, n 1.49 in 1.518), its flat and white frames, paper optics at
     condenser NA 0.3."""
     frame, flat, white, optics = bead_frames()
+    _fit_view_on_arrival()
     meta = _optics_meta(optics, "paper")
     lims = _contrast(frame)
     um = frame_transform(optics, 2)  # in the volume's µm (placement.py)
@@ -359,6 +379,7 @@ def moving_sample_series(n_frames: int = SERIES_FRAMES, prefetch: bool = True):
     """
     flat, white = series_flat_white()
     optics = series_optics()
+    _fit_view_on_arrival()
     meta = _optics_meta(optics, "water")
     lims = _contrast(flat)
     series = series_array(n_frames, prefetch)

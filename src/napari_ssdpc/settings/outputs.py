@@ -57,6 +57,8 @@ class Quantity:
         Channel names of a 'channels' quantity.
     needs_stacks : bool
         Computed from the Richardson-Lucy stacks (the slower path).
+    decimals : int or None
+        Decimals a value is shown with (napari's status bar); None: three significant digits.
     """
 
     name: str
@@ -69,6 +71,7 @@ class Quantity:
     get: Callable[[Any], Any]
     channels: tuple[str, ...] = ()
     needs_stacks: bool = False
+    decimals: int | None = None
 
     @property
     def axes(self) -> str:
@@ -108,7 +111,7 @@ class Quantity:
 QUANTITIES: dict[str, Quantity] = {
     q.name: q
     for q in (
-        Quantity("ri", "RI", "", "refractive index", "RdBu_r", True, "volume", lambda r: r.ri),
+        Quantity("ri", "RI", "", "refractive index", "RdBu_r", True, "volume", lambda r: r.ri, decimals=4),
         Quantity(
             "delta_n",
             "Δn",
@@ -118,6 +121,7 @@ QUANTITIES: dict[str, Quantity] = {
             True,
             "volume",
             lambda r: r.delta_n,
+            decimals=4,
         ),
         Quantity("phase", "phase", "rad", "phase per slab, rad", "RdBu_r", True, "volume", lambda r: r.phase),
         Quantity(
