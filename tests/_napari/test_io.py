@@ -206,10 +206,10 @@ def test_time_series_sample_is_lazy_20_frames(tmp_path, monkeypatch):
     import dask.array as da
 
     calls = []
-    monkeypatch.setattr(_sample_data, "series_frame", lambda i, n: calls.append(i) or np.zeros((2048, 2448), np.uint16))
+    monkeypatch.setattr(_sample_data, "series_frame", lambda i, n: calls.append(i) or np.zeros((1024, 1024), np.uint16))
     layers = _sample_data.moving_sample_series(prefetch=False)
     series = layers[-1][0]
-    assert isinstance(series, da.Array) and series.shape == (20, 2048, 2448) and series.dtype == np.uint16
+    assert isinstance(series, da.Array) and series.shape == (20, 1024, 1024) and series.dtype == np.uint16
     assert calls == []  # nothing simulated until a frame is read
     series[7].compute()
     assert calls == [7]

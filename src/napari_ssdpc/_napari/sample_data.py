@@ -3,15 +3,17 @@
 - ``pmma_bead_sample``: the paper's PMMA bead (13 µm, n 1.49 in oil 1.518), its flat frame
   (same condenser NA 0.3) and a white frame (condenser fully open, for calibration), paper optics
   with a 1024 x 1024 px camera region that holds the whole pupil. The three frames ship with the
-  package (``data/``, 3 MB, written by :func:`ship_bead_frames`), so the sample opens in about
+  package (``data/``, 3 MB, written by :func:`ship_frames`), so the sample opens in about
   0.5 s; were they stale, it would be simulated (about a minute on two cores) and cached.
 - ``moving_sample_series``: a swimming cell-like sample in water (``moving.moving_sample``),
-  20 frames. Reduced cost: the condenser disk is sampled every 4 lattice units
-  (``Source(step=4)``, 221 source points instead of 821; about 4 s per frame instead of 18 s,
-  and at most 3 % of the peak intensity different from the full sampling). The series is a lazy
-  dask array whose frames a background thread simulates and caches as soon as the sample opens,
-  onward from the last frame read; a frame read before the thread reaches it (on the time slider or
-  by the Reconstruct widget) waits for it, never for a second simulation of it.
+  20 frames, the bead's optics (condenser NA 0.3, where the lenslets carry phase contrast, and the
+  1024 x 1024 px region). Reduced cost: the condenser disk is sampled every 4 lattice units
+  (``Source(step=4)``; at most 3 % of the peak intensity different from the full sampling; about
+  30 s a frame on two cores). Its flat, white and first frames ship with the package, so it opens
+  at once; the series is a lazy dask array whose other frames a background thread simulates and
+  caches as soon as the sample opens, onward from the last frame read; a frame read before the
+  thread reaches it (on the time slider or by the Reconstruct widget) waits for it, never for a
+  second simulation of it.
 
 The cache lives in ``$NAPARI_SSDPC_CACHE`` (default ``~/.cache/napari-ssdpc``) under the package
 version; file names carry a hash of everything that made the frame, so a changed setting never
@@ -33,7 +35,7 @@ import numpy as np
 from napari_ssdpc import __version__
 from napari_ssdpc._napari.placement import fit_view, frame_transform
 
-#: Sample frames shipped with the package (``ship_bead_frames``): the bead opens at once.
+#: Sample frames shipped with the package (``ship_frames``): the samples open at once.
 SHIPPED = Path(__file__).parent / "data"
 #: The bead sample's camera region of interest (px): the whole objective pupil (radius 435 px) fits.
 BEAD_ROI_PX = 1024
@@ -137,6 +139,27 @@ def _contrast(frame) -> list[float]:
 
 
 # ---------------------------------------------------------------------------- bead
+def sample_optics(medium_index: float | None = None):
+    """The samples' optics: the paper's at condenser NA 0.3 (the condenser-NA sweep of
+    docs/validation.md) on a 1024 x 1024 px camera region that holds the whole pupil.
+
+    Parameters
+    ----------
+    medium_index : float, optional
+        The immersion medium (default the paper's oil).
+
+    Returns
+    -------
+    Optics
+    """
+    from napari_ssdpc.settings.optics import Optics
+
+    optics = Optics.paper().replace(
+        condenser_na=0.3, width_px=BEAD_ROI_PX, height_px=BEAD_ROI_PX, name="paper optics, 1024 px region"
+    )
+    return optics if medium_index is None else optics.replace(medium_index=medium_index)
+
+
 def bead_frames():
     """(frame, flat, white, optics) of the PMMA bead with the paper's optics at condenser NA 0.3.
 
@@ -144,11 +167,7 @@ def bead_frames():
     bead (axial FWHM ~16 µm); at the paper optics' 0.1 only four lenslets carry phase and it
     would be a needle over 100 µm long.
     """
-    from napari_ssdpc.settings.optics import Optics
-
-    optics = Optics.paper().replace(  # NA 0.3: the condenser-NA sweep of docs/validation.md
-        condenser_na=0.3, width_px=BEAD_ROI_PX, height_px=BEAD_ROI_PX, name="paper optics, 1024 px region"
-    )
+    optics = sample_optics()
     base = (_physics(optics), __version__)
 
     def simulated(kind: str, seed: int):  # only when the shipped frames are stale: the simulator loads then
@@ -167,8 +186,9 @@ def bead_frames():
     return frame, flat, white, optics
 
 
-def ship_bead_frames(folder: Path = SHIPPED) -> list[Path]:
-    """Write the bead sample's frames (zlib-compressed TIFFs) where the package reads them first.
+def ship_frames(folder: Path = SHIPPED) -> list[Path]:
+    """Write the frames that open a sample at once (zlib-compressed TIFFs) where the package reads
+    them first: the bead's three, and the time series' flat, white and first frames.
 
     Run after a change of the simulator or of the sample's optics (the file names carry a hash
     of both, so stale frames are never read; the sample is then simulated on first use).
@@ -188,9 +208,12 @@ def ship_bead_frames(folder: Path = SHIPPED) -> list[Path]:
     from napari_ssdpc.io.frames import read_frame
 
     bead_frames()  # simulated into the cache if needed
+    series_flat_white()
+    series_frame(0)
     folder.mkdir(parents=True, exist_ok=True)
     out = []
-    for made in sorted(cache_dir().glob("pmma_bead*.tif")):
+    shipped = ("pmma_bead*.tif", "moving_flat-*.tif", "moving_white-*.tif", f"moving_{SERIES_FRAMES}_000-*.tif")
+    for made in sorted(p for pattern in shipped for p in cache_dir().glob(pattern)):
         frame = read_frame(made, name="sample frame")
         if frame.shape == (BEAD_ROI_PX, BEAD_ROI_PX):
             tifffile.imwrite(folder / made.name, frame, compression="zlib", photometric="minisblack")
@@ -235,10 +258,8 @@ def pmma_bead_sample():
 
 # ---------------------------------------------------------------------- time series
 def series_optics():
-    """Paper optics with water as the medium (the moving sample swims in water)."""
-    from napari_ssdpc.settings.optics import Optics
-
-    return Optics.paper().replace(medium_index=1.33)
+    """The samples' optics with water as the medium (the moving sample swims in water)."""
+    return sample_optics(medium_index=1.33)
 
 
 def series_frame(i: int, n_frames: int = SERIES_FRAMES) -> np.ndarray:

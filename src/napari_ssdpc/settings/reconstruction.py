@@ -197,7 +197,7 @@ class MultisliceSettings(SettingsModel):
             "medium_edge_um",
         }
         | {"roi_um"}
-        | {"tv_weight", "stop_residual_over_noise", "model_error", "unknowns"}
+        | {"tv_weight", "stop_residual_over_noise", "model_error", "unknowns", "support_margin_um", "sphere_start"}
     )
 
     iterations: int = bounded(60, 1, 500, "most gradient iterations of the refinement")
@@ -245,6 +245,12 @@ class MultisliceSettings(SettingsModel):
         100.0,
         "a second fit held to the first fit's objects grown by this margin, µm (their Δn elsewhere at the "
         "medium); 0: none",
+    )
+
+    sphere_start: bool = Field(
+        True,
+        description="when 'tv' finds a strong object, fit the objects as spheres (the bead fit) for a second start, "
+        "kept where it explains the views better than the 'tv' answer",
     )
 
     @model_validator(mode="before")

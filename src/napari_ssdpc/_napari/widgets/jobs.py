@@ -22,7 +22,7 @@ from napari.utils import progress as napari_progress
 from napari_ssdpc._napari import notify
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 
-__all__ = ["JobRunner", "Outcome"]
+__all__ = ["JobRunner", "Outcome", "Partial"]
 
 
 @dataclass
@@ -32,6 +32,13 @@ class Outcome:
     value: object = None
     error: str | None = None
     cancelled: bool = False
+
+
+@dataclass
+class Partial:
+    """Something a job shows before it ends (a quick first answer): ``progress.partial(value)``."""
+
+    value: object
 
 
 def _relay(fn, stop: threading.Event):
@@ -46,6 +53,13 @@ def _relay(fn, stop: threading.Event):
         if stop.is_set():
             raise Cancelled("cancelled")
         reports.put((int(done), int(total), str(label)))
+
+    def partial(value):
+        if stop.is_set():
+            raise Cancelled("cancelled")
+        reports.put(Partial(value))
+
+    progress.partial = partial  # type: ignore[attr-defined]
 
     def target():
         try:
@@ -91,6 +105,7 @@ class JobRunner:
         self._stop = None
         self._pbar = None
         self._in_update = False
+        self._on_partial = None
         cancel.enabled = False
         cancel.changed.connect(self.cancel)
 
@@ -99,17 +114,20 @@ class JobRunner:
         """Whether a job is running."""
         return self.worker is not None
 
-    def start(self, fn, on_result, label: str):
+    def start(self, fn, on_result, label: str, on_partial=None):
         """Run ``fn`` in a worker with progress and Cancel.
 
         Parameters
         ----------
         fn : callable
-            ``fn(progress, should_stop)``, run in a helper thread.
+            ``fn(progress, should_stop)``, run in a helper thread; ``progress.partial(value)``
+            hands ``value`` to ``on_partial`` while it goes on.
         on_result : callable
             ``on_result(value)`` on the main thread; returns the status text.
         label : str
             Progress-bar title.
+        on_partial : callable, optional
+            ``on_partial(value)`` on the main thread; returns the status text.
 
         Returns
         -------
@@ -121,6 +139,7 @@ class JobRunner:
             return None
         self._stop = threading.Event()
         self._warned = set()
+        self._on_partial = on_partial
         self._pbar = napari_progress(total=0, desc=label)
         self.status.value = f"{label}…"
         self.run_button.enabled = False
@@ -142,6 +161,9 @@ class JobRunner:
             self.status.value = "cancelling…"
 
     def _on_progress(self, msg):
+        if isinstance(msg, Partial):
+            self._show_partial(msg.value)
+            return
         done, total, label = msg
         pbar = self._pbar
         if pbar is None:
@@ -157,6 +179,17 @@ class JobRunner:
             pbar.update(done - pbar.n)
         finally:
             self._in_update = False
+
+    def _show_partial(self, value):
+        if self._on_partial is None or (self._stop is not None and self._stop.is_set()):
+            return
+        try:
+            msg = self._on_partial(value)
+        except SsdpcError as e:
+            notify.error(str(e))
+        else:
+            if msg:
+                self.status.value = msg
 
     def _on_aborted(self):
         """napari's own cancel (worker.quit): stop the core too."""

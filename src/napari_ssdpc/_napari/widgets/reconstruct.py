@@ -196,10 +196,15 @@ class ReconstructWidget(StepWidget):
         store = str(self.store.value or "")
         if series and store.endswith(".zarr"):
             return self._stream(layer, job, built, Path(store))
-        frames = data if series else np.asarray(data if t is None else data[t])
+        frames = data if series or t is None else data[t]  # read in the worker: a lazy frame may still be simulated
 
         def work(progress, should_stop):
             pipeline = Pipeline(job, reconstructor=built, progress=progress)
+            todo = frames if series else np.asarray(frames)
+            if not series:  # a quick first answer on screen while an iterative method works
+                first = pipeline.reconstructor.first_answer(todo)
+                if first is not None:
+                    progress.partial((pipeline.reconstructor, result_arrays(first, wanted), first))
             sink = MemorySink(keep=lambda res: (result_arrays(res, wanted), res))
             label = {"t": 0}
 
@@ -211,13 +216,23 @@ class ReconstructWidget(StepWidget):
                 progress(d, n, prefix + lab)
 
             pipeline.run(
-                frames, sink, progress=False, on_frame=per_frame, iteration_progress=within, should_stop=should_stop
+                todo, sink, progress=False, on_frame=per_frame, iteration_progress=within, should_stop=should_stop
             )
             kept = [sink.frames[i] for i in sorted(sink.frames)]
             out = {q: (np.stack([k[0][q] for k in kept]) if series else kept[0][0][q]) for q in kept[-1][0]}
             return pipeline.reconstructor, out, kept[-1][1]
 
-        return self.runner.start(work, lambda r: self._done(job, layer.name, indices, *r), "Reconstruct")
+        return self.runner.start(
+            work,
+            lambda r: self._done(job, layer.name, indices, *r),
+            "Reconstruct",
+            on_partial=lambda r: self._first(job, layer.name, indices, *r),
+        )
+
+    def _first(self, job, source, indices, rec, arrays, res):
+        """Show the first answer (the layers the result will replace) while the method works."""
+        self._show(source, indices, rec, arrays, res)
+        return f"{source}: first answer shown ({res.settings['first_answer']}); {rec.method.name} working…"
 
     def _stream(self, layer, job, built, store: Path):
         """Every frame of a series into the OME-Zarr ``store``, shown from disk as frames finish."""
@@ -281,6 +296,15 @@ class ReconstructWidget(StepWidget):
     def _done(self, job, source, indices, rec, arrays, res):
         self.session.built = (job, rec)
         self.session.operators_built.emit(rec)
+        info = self._show(source, indices, rec, arrays, res)
+        shape = next(iter(arrays.values())).shape
+        return (
+            f"{source}: {' × '.join(map(str, shape))} voxels of {' × '.join(f'{v:.3g}' for v in res.voxel_um)} µm; "
+            f"{resolution_text(info['axial_fwhm_um'])}"
+        )
+
+    def _show(self, source, indices, rec, arrays, res) -> dict:
+        """The result's layers, shown (replaced in place when they exist); returns their metadata."""
         optics = rec.optics
         info = {
             "source": source,
@@ -295,8 +319,4 @@ class ReconstructWidget(StepWidget):
         for q, a in arrays.items():  # the first result is brought into view (placement.follow_results)
             data, kwargs, _ = result_layer(a, q, res.voxel_um, origin, name=source, info=info)
             show_layer(self.viewer, data, kwargs)
-        shape = next(iter(arrays.values())).shape
-        return (
-            f"{source}: {' × '.join(map(str, shape))} voxels of {' × '.join(f'{v:.3g}' for v in res.voxel_um)} µm; "
-            f"{resolution_text(info['axial_fwhm_um'])}"
-        )
+        return info

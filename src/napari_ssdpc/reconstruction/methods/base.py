@@ -132,6 +132,20 @@ class PhaseMethod(ABC):
         sol.method = self.name
         return sol
 
+    def first_answer(self, views) -> Solution | None:
+        """A quick first answer of the frame, to show while :meth:`solve` works (an iterative
+        method's start); None where the method has none quicker than its answer.
+
+        Parameters
+        ----------
+        views : ndarray, float32, (K, ny, nx)
+
+        Returns
+        -------
+        Solution or None
+        """
+        return None
+
     @classmethod
     def on(cls, start: PhaseMethod) -> PhaseMethod:
         """This method built on an already built ``start`` method (its :attr:`starts_from`), sharing

@@ -42,10 +42,11 @@ from napari_ssdpc.physics.views_multislice import ViewsMultislice
 from napari_ssdpc.reconstruction.fit_objects import OBJECT_LEVEL, explained_limit, fit_objects, object_labels
 from napari_ssdpc.reconstruction.memory import available_memory
 from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
-from napari_ssdpc.reconstruction.methods.tv import TvMethod
+from napari_ssdpc.reconstruction.methods.tv import STRONG_PHASE_RAD, TvMethod
 from napari_ssdpc.reconstruction.nonlinear import Fit, Unknowns, discrepancy_stop, projected_gradient
 from napari_ssdpc.reconstruction.proximal import bounds
 from napari_ssdpc.reconstruction.regularised import TvState
+from napari_ssdpc.reconstruction.sphere_volume import spheres_volume
 
 __all__ = ["MultisliceMethod", "medium_edge", "object_support", "objects_roi", "unexplained_columns"]
 
@@ -53,6 +54,12 @@ __all__ = ["MultisliceMethod", "medium_edge", "object_support", "objects_roi", "
 TOLERANCE = 1e-3
 #: Fits held to the objects' support, each freeing the columns the one before left unexplained.
 SUPPORT_ROUNDS = 3
+#: A start is as good as the stop when its misfit exceeds it by less than this many standard
+#: deviations of a mean of n squared Gaussian residuals (relative: sqrt(2 / n)).
+WITHIN_STOP_SIGMAS = 3.0
+#: The sphere start clears the first answer this far around each bead's disk, µm, on every plane
+#: (a strong bead's first-order answer trails along its axis).
+SPHERE_CLEAR_UM = 2.0
 
 
 def objects_roi(dn, x_um, y_um, margin_um: float, level: float = OBJECT_LEVEL):
@@ -176,6 +183,15 @@ def _roi_of(box_um, x_um, y_um):
     return square_roi(x_um, y_um, ((x0 + x1) / 2, (y0 + y1) / 2), max(x1 - x0, y1 - y0))
 
 
+def _starts_report(starts: dict, chosen: str, beads: list) -> dict:
+    """The report's record of the starts: their misfits over the noise, the one taken, its beads."""
+    return {
+        "multislice_starts_over_noise": starts,
+        "multislice_start": chosen,
+        "multislice_start_beads": [b.to_dict() for b in beads] if chosen.startswith("spheres") else [],
+    }
+
+
 def _sign_of(start: Solution) -> str:
     """The sign the 'tv' start solved with ('auto' resolved), from its end state."""
     if not isinstance(start.state, TvState):
@@ -219,6 +235,19 @@ class MultisliceMethod(PhaseMethod):
     def start(self) -> TvMethod:
         """The 'tv' method it refines."""
         return self.tv
+
+    def first_answer(self, views) -> Solution:
+        """The first answer of its 'tv' start (:meth:`TvMethod.first_answer`).
+
+        Parameters
+        ----------
+        views : ndarray, float32, (K, ny, nx)
+
+        Returns
+        -------
+        Solution
+        """
+        return self.tv.first_answer(views)
 
     def _solve(self, views, stacks, warm, progress, should_stop):
         s, v = self.setup, self.setup.views
@@ -295,13 +324,49 @@ class MultisliceMethod(PhaseMethod):
 
         # a start the model explains as it is (a weak object) is kept whole, tails of the missing cone
         # included: cutting them would only lose the mass they carry
+        within = enough * (1.0 + WITHIN_STOP_SIGMAS * math.sqrt(2.0 / n_data))  # the stop, within the misfit's scatter
         coarse = fit_on(model, fine=False)
         x0 = coarse.project(bk.asarray(dn[:, rows, cols]))
         r = coarse.residual(x0)
         f0 = 0.5 * float(bk.xp.sum(r * r))
-        if f0 <= enough:
+        over_noise = (lambda f: 2.0 * f / n_data / noise**2) if noise > 0 else (lambda f: None)
+        starts = {"tv": over_noise(f0)}
+        if f0 <= within:
             kept = report(coarse, model, x0, bk.to_host(x0), {"objective": [f0], "relative_change": []}, True)
+            kept |= _starts_report(starts, "tv", [])
             return Solution(start.phase, kept, {**start.history, "multislice": {"objective": [f0]}}, state=start.state)
+
+        fine = ms.unknowns == "model"  # sub-pixel edges: each view pixel's k x k model samples are free
+        unknowns = Unknowns(ms.refine, bk.xp)
+        fit = fit_on(model, fine)
+        x_start, chosen, beads = unknowns.up(x0) if fine else x0, "tv", []
+        strong = float(start.report.get("tv_phase_through_rad", 0.0)) > STRONG_PHASE_RAD
+        if ms.sphere_start and strong and noise > 0:
+            # a second start: the strong objects fitted as spheres (Chowdhury et al. 2019 start from a
+            # first-order answer; a strong bead's lies toward its focus, where the fit stays trapped)
+            candidates, beads = self._sphere_start(views, dn, rows, cols, model, noise, progress, should_stop)
+            best = f0
+            for label, spheres in candidates.items():  # ranked by the misfit
+                xs = fit.project(spheres if fine else unknowns.down(spheres) / ms.refine**2)
+                rs = fit.residual(xs)
+                fs = 0.5 * float(bk.xp.sum(rs * rs))
+                starts[label] = over_noise(fs)
+                if fs < best:
+                    x_start, chosen, best = xs, label, fs
+            if chosen != "tv":
+                xs, fs = x_start, best
+                if fs <= within:  # the spheres explain the views: kept as they are
+                    on_views = unknowns.down(xs) / ms.refine**2 if fine else xs
+                    dn[:, rows, cols] = bk.to_host(on_views)
+                    history = {"objective": [fs], "relative_change": []}
+                    kept = report(fit, model, xs, dn[:, rows, cols], history, True)
+                    kept |= _starts_report(starts, chosen, beads)
+                    return Solution(
+                        (dn / to_dn).astype(np.float32),
+                        kept,
+                        {**start.history, "multislice": history},
+                        state=start.state,
+                    )
 
         def fitted(fit: Fit, start, label: str):
             return projected_gradient(
@@ -315,9 +380,7 @@ class MultisliceMethod(PhaseMethod):
                 label=label,
             )
 
-        fine = ms.unknowns == "model"  # sub-pixel edges: each view pixel's k x k model samples are free
-        fit = fit_on(model, fine)
-        result = fitted(fit, Unknowns(ms.refine, bk.xp).up(x0) if fine else x0, "multislice")
+        result = fitted(fit, x_start, "multislice")
         x = Unknowns(ms.refine, bk.xp).down(result.x) / ms.refine**2 if fine else result.x  # the views' grid
         if ms.support_margin_um > 0 and not (should_stop is not None and should_stop()):
             # a second fit held to the first one's objects (grown by the margin): the Δn the first
@@ -340,6 +403,7 @@ class MultisliceMethod(PhaseMethod):
             x = Unknowns(ms.refine, bk.xp).down(result.x) / ms.refine**2 if fine else result.x
         dn[:, rows, cols] = bk.to_host(x)
         out = report(fit, model, result.x, dn[:, rows, cols], result.history, result.converged)
+        out |= _starts_report(starts, chosen, beads)
         stopped = should_stop is not None and should_stop()
         if not result.converged and not stopped:
             warnings.warn(
@@ -365,6 +429,45 @@ class MultisliceMethod(PhaseMethod):
             )
         history = {**start.history, "multislice": result.history}
         return Solution((dn / to_dn).astype(np.float32), out, history, state=start.state)
+
+    def _sphere_start(self, views, dn, rows, cols, model, noise, progress, should_stop):
+        """The region's start with the beads of the first answer fitted as spheres (``ssdpc beads``).
+
+        Every bead the fit vouches for (converged, explained, apart from the others) replaces the first
+        answer in its column (its disk plus :data:`SPHERE_CLEAR_UM`, every plane) by the sphere drawn on
+        the model's grid.
+
+        Returns
+        -------
+        starts : dict
+            {'spheres': the first answer with the spheres in place of the beads, 'spheres alone':
+            the spheres in the medium}: Δn on the model's grid, (Z, k·ny, k·nx), on the backend;
+            empty when no bead qualifies.
+        beads : list of Bead
+            Those used.
+        """
+        from napari_ssdpc.reconstruction.beads import fit_beads
+
+        s, v, ms = self.setup, self.setup.views, self.setup.settings.multislice
+        found = fit_beads(
+            v, views, dn, s.z_um, noise=noise, optics=s.optics, settings=ms, backend=s.backend,
+            progress=progress, should_stop=should_stop,
+        )  # fmt: skip
+        x_um, y_um = v.x_um[cols], v.y_um[rows]
+        used = [
+            b for b in found
+            if not b.note and x_um[0] < b.centre_um[0] < x_um[-1] and y_um[0] < b.centre_um[1] < y_um[-1]
+        ]  # fmt: skip
+        if not used:
+            return {}, []
+        first = np.array(dn[:, rows, cols], np.float32)
+        for b in used:
+            reach = b.diameter_um / 2 + SPHERE_CLEAR_UM
+            first[:, np.hypot(x_um[None, :] - b.centre_um[0], y_um[:, None] - b.centre_um[1]) <= reach] = 0.0
+        rows_ = np.array([[*b.centre_um, b.diameter_um / 2, b.delta_n] for b in used])
+        drawn = s.backend.asarray(spheres_volume(rows_, model.z_um, model.y_um, model.x_um, s.dz_um).astype(np.float32))
+        rest = Unknowns(ms.refine, s.backend.xp).up(s.backend.asarray(first))
+        return {"spheres": drawn + rest, "spheres alone": drawn}, used
 
     def _model(self, rows: slice, cols: slice) -> ViewsMultislice:
         """The multislice model of the views on every plane of the output grid and the region (rows, cols):

@@ -89,6 +89,23 @@ class TvMethod(PhaseMethod):
         wotf = WotfInversion(model.planes(planes), setup.settings.tv.alpha)
         return cls(setup, wotf, TvInversion(model, planes, r_z, mask=setup.views.mask))
 
+    def first_answer(self, views) -> Solution:
+        """The Tikhonov inverse this method starts from (the 'wotf' answer on its planes): shown
+        while the iterations run.
+
+        Parameters
+        ----------
+        views : ndarray, float32, (K, ny, nx)
+
+        Returns
+        -------
+        Solution
+            Its report names it (``first_answer``).
+        """
+        v = self.setup.views
+        phase = self.wotf.phase(contrast_of(views, v.view_mask)) * v.mask
+        return Solution(phase, {"first_answer": "Tikhonov inverse, the start of 'tv'"}, method=self.name)
+
     def _solve(self, views, stacks, warm, progress, should_stop):
         v, t = self.setup.views, self.setup.settings.tv
         contrast = contrast_of(views, v.view_mask)
