@@ -411,3 +411,18 @@ def test_the_refinement_reuses_the_tv_answer_of_the_same_frame(case, calibration
     assert "tv_reused" not in other.settings
     assert rec.adopt(run_config(case.optics, z=(-30, 30), dz=2)) and rec.method is tv_method
     assert not rec.adopt(run_config(case.optics, z=(-30, 30), dz=2, method="wotf"))  # other operators
+
+
+def test_the_bead_figure_is_readable_at_1280_px_and_the_solver_has_its_own(result, tmp_path):
+    """summary.png of the demo: slices, profiles against the truth and the bead's numbers in 1280 x 800
+    px (it was a 2052 x 351 strip); the solver's convergence in a figure of its own."""
+    import matplotlib.image as mpimg
+
+    from napari_ssdpc.validation.figures import bead_figure, solver_figure
+
+    bead_figure(result, BEAD, BEAD.medium_index, tmp_path / "summary.png", "a weak bead")
+    assert mpimg.imread(tmp_path / "summary.png").shape[:2] == (800, 1280)
+    assert solver_figure(result, tmp_path / "solver.png") == tmp_path / "solver.png"
+    assert mpimg.imread(tmp_path / "solver.png").shape[1] <= 1280
+    no_iterations = type(result)(**{**result.__dict__, "convergence": {}})
+    assert solver_figure(no_iterations, tmp_path / "none.png") is None and not (tmp_path / "none.png").exists()

@@ -162,6 +162,7 @@ def flat_frame(
     source: Source | None = None,
     *,
     array: ArrayErrors | None = None,
+    progress=None,
 ) -> np.ndarray:
     """Raw uint16 flat frame (no sample) at the sample's condenser NA (σ < 1).
 
@@ -178,6 +179,8 @@ def flat_frame(
         Sampling of the condenser disk; default ``Source()``.
     array : ArrayErrors, optional
         Errors of the array; None: the ideal lattice.
+    progress : callable, optional
+        ``progress(done, total)`` per source point.
 
     Returns
     -------
@@ -185,4 +188,5 @@ def flat_frame(
         ADU.
     """
     camera = camera or Camera()
-    return camera.apply(flat_intensity(optics, grid, camera, source, array=array), camera.rng(rng))
+    intensity = flat_intensity(optics, grid, camera, source, array=array, progress=progress)
+    return camera.apply(intensity, camera.rng(rng))

@@ -19,12 +19,15 @@ from napari_ssdpc.simulation import phantoms
 from napari_ssdpc.simulation.sample_free import flat_frame, white_frame
 from napari_ssdpc.simulation.simulate import simulate
 from napari_ssdpc.validation.cases import VALIDATION_NA, run_config
-from napari_ssdpc.validation.figures import bead_figure, comparison_figure
+from napari_ssdpc.validation.figures import bead_figure, comparison_figure, solver_figure
 from napari_ssdpc.validation.mass import mass_and_tail
 from napari_ssdpc.validation.truth import bead_metrics
 
 # What the demo writes into its folder (each file atomically; the three frames as one set).
-DEMO_FILES = ("bead.tif", "flat.tif", "white.tif", "calibration.json", "calibration.png", "ri.ome.tif", "summary.png")
+DEMO_FILES = (
+    "bead.tif", "flat.tif", "white.tif", "calibration.json", "calibration.png", "ri.ome.tif",
+    "summary.png", "solver.png",
+)  # fmt: skip
 # ... and with ``refine``: the multislice refinement beside the first-order answer.
 REFINE_FILES = ("ri_multislice.ome.tif", "refined.png")
 
@@ -78,7 +81,9 @@ def run_demo(
     t0 = time.perf_counter()
     with tqdm_callback("simulating the PMMA bead", unit="source point") as cb:
         frame = simulate(bead, optics, grid=grid, rng=rng, progress=cb).frame
-    flat = flat_frame(optics, grid=grid, rng=rng)
+    with tqdm_callback("simulating the flat frame", unit="source point") as cb:
+        flat = flat_frame(optics, grid=grid, rng=rng, progress=cb)
+    print("simulating the white frame (condenser open)", flush=True)
     white = white_frame(optics, grid=grid, rng=rng)
     t_sim = time.perf_counter() - t0
     write_tiffs({out / "bead.tif": frame, out / "flat.tif": flat, out / "white.tif": white})
@@ -116,7 +121,8 @@ def run_demo(
             f"TV solve: {st['tv_iterations_run']} iterations, sign {st['tv_sign']}, noise {st['tv_noise']:.3g}, "
             f"residual / noise {st['tv_residual_over_noise']:.1f}"
         )
-    print(f"wrote {out / 'ri.ome.tif'} and {fig}")
+    solver = solver_figure(result, out / "solver.png", f"how the '{rec.method.name}' solver ran")
+    print(f"wrote {out / 'ri.ome.tif'}, {fig} and {solver}")
     done = {"calibration": cal, "result": result, "metrics": m, "simulation_s": t_sim, "reconstruction_s": t_rec}
     if refine:
         done.update(_refine(out, frame, rec, optics, bead, result, z, dz))
