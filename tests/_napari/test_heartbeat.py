@@ -1,8 +1,11 @@
 """The GUI never stalls: a 50 ms timer on napari's event loop while a user goes through the whole
-workflow in the menu order (open the dock, open the sample, calibrate, reconstruct, draw a profile,
-look at the slices, reconstruct a series into a store, export a movie); no gap between two beats may
-exceed 1 s, and every layer box holds the right layer on its own (docs/napari.md gives the measured
-waits)."""
+workflow in the menu order (open the dock, open the bead sample, calibrate, reconstruct, draw a
+profile, look at the slices, reconstruct a series into a store, export a movie, open the time-series
+sample), on a quiet machine and beside a neighbour that keeps every core busy. No gap between two
+beats may exceed 1 s, or napari's own longest gap on the same display and load (idle, and adding
+three 1024 x 1024 images) times 1.5, where that is longer (a step that adds layers cannot beat
+napari adding them, nor any step a loaded machine's idle beat); every layer box holds the right
+layer on its own (docs/napari.md gives the measured waits)."""
 
 from __future__ import annotations
 
@@ -19,10 +22,9 @@ from napari_ssdpc._napari import notify as _notify
 
 BEAT_MS = 50
 MAX_STALL_S = 1.0  # generous for a CI machine; a quiet 2-core machine measures about 0.7 s (docs/napari.md)
-#: napari alone adding three 1024 x 1024 images (what opening the sample costs it): 0.4 s on the quiet
-#: 2-core machine the bound was set on. A display that makes napari itself slower than this cannot
-#: tell the plugin's stalls from its own (docs/napari.md): the test says so and skips.
-REFERENCE_MAX_S = 0.6
+#: The bound where napari's own stall adding three 1024 x 1024 images (what opening a sample costs
+#: it) is longer than the plugin's bound would allow: this many times napari's own.
+OVER_NAPARI = 1.5
 
 
 def _busy() -> str:
@@ -32,10 +34,38 @@ def _busy() -> str:
     return f"the machine is busy (load {load:.1f} on {cores} cores)" if load > cores else ""
 
 
+@pytest.fixture
+def busy_neighbour():
+    """A process per core spinning for as long as the test runs."""
+    import subprocess
+    import sys
+
+    spinners = [
+        subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(os.cpu_count() or 1)
+    ]  # fmt: skip
+    time.sleep(1.0)  # every core busy before the walk starts
+    yield len(spinners)
+    for p in spinners:
+        p.kill()
+        p.wait()
+
+
 @pytest.mark.skipif(bool(_busy()), reason=_busy() or "-")
 def test_the_event_loop_keeps_beating_through_the_whole_workflow(make_napari_viewer, qtbot, monkeypatch, tmp_path):
+    _walk(make_napari_viewer, qtbot, monkeypatch, tmp_path)
+
+
+def test_the_event_loop_keeps_beating_beside_a_neighbour_that_keeps_every_core_busy(
+    make_napari_viewer, qtbot, monkeypatch, tmp_path, busy_neighbour
+):
+    _walk(make_napari_viewer, qtbot, monkeypatch, tmp_path)
+
+
+def _walk(make_napari_viewer, qtbot, monkeypatch, tmp_path):
     import numpy as np
     from qtpy.QtCore import QTimer
+
+    from napari_ssdpc._napari import sample_data
 
     shown = []
     monkeypatch.setattr(_notify, "error", lambda msg: shown.append(str(msg)))
@@ -50,7 +80,7 @@ def test_the_event_loop_keeps_beating_through_the_whole_workflow(make_napari_vie
     timer = QTimer()
     timer.timeout.connect(lambda: beats.append((time.perf_counter(), step[0])))
     timer.start(BEAT_MS)
-    qtbot.wait(300)
+    qtbot.wait(1500)  # napari doing nothing: what the display and the load alone cost a beat
     out = {}
 
     def napari_alone():
@@ -65,17 +95,15 @@ def test_the_event_loop_keeps_beating_through_the_whole_workflow(make_napari_vie
     n = len(beats)
     qtbot.waitUntil(lambda: len(beats) > n + 1, timeout=20000)
     step[0] = "idle"
-    reference = max((t1 - t0 for (t0, _), (t1, n) in zip(beats, beats[1:]) if n == "napari alone"), default=0.0)
+    # napari's own: adding the images, or doing nothing at all on a loaded machine
+    reference = max(
+        (t1 - t0 for (t0, _), (t1, n) in zip(beats, beats[1:]) if n in ("napari alone", "idle")), default=0.0
+    )
     for i in range(3):
         viewer.layers.remove(f"reference {i}")
     qtbot.wait(300)
-    print(f"napari alone, three 1024 x 1024 images: longest gap {reference:.2f} s")
-    if reference > REFERENCE_MAX_S:
-        timer.stop()
-        pytest.skip(
-            f"napari itself stalls {reference:.2f} s adding three images on this display (at most "
-            f"{REFERENCE_MAX_S} s for the 1 s bound): too slow to measure the plugin's stalls"
-        )
+    bound = max(MAX_STALL_S, OVER_NAPARI * reference)
+    print(f"napari alone (idle, three 1024 x 1024 images): longest gap {reference:.2f} s; the bound {bound:.2f} s")
 
     def run(name, action, widget=None, settle_ms=500):
         step[0] = name
@@ -122,13 +150,18 @@ def test_the_event_loop_keeps_beating_through_the_whole_workflow(make_napari_vie
     movie.seconds.value, movie.fps.value, movie.path.value = 1, 8, tmp_path / "bead.gif"
     run("export a movie", movie.export, movie)
     assert (tmp_path / "bead.gif").is_file(), (movie.status.value, shown)
+    # last, as a user trying the other sample: it opens from its shipped frames (the thread that
+    # simulates the others is left out: it would outlive the test)
+    monkeypatch.setattr(sample_data, "SeriesPrefetch", lambda n: None)
+    run("open the time-series sample", lambda: viewer.open_sample("napari-ssdpc", "moving_sample"))
+    assert viewer.layers["moving sample"].data.shape[0] == sample_data.SERIES_FRAMES
     timer.stop()
     assert shown == []
     gaps = {}
     for (t0, _), (t1, name) in zip(beats, beats[1:]):
-        if name != "napari alone":
+        if name not in ("napari alone", "idle"):
             gaps[name] = max(gaps.get(name, 0.0), t1 - t0)
     print("longest gap between beats per step, s:", {k: round(v, 2) for k, v in gaps.items()})
     steps = {"open the dock", "open the sample", "calibrate", "reconstruct", "draw a profile", "look at the slices"}
-    assert set(gaps) >= steps | {"reconstruct a series", "export a movie"}
-    assert max(gaps.values()) < MAX_STALL_S, {k: round(v, 2) for k, v in gaps.items()}
+    assert set(gaps) >= steps | {"open the time-series sample", "reconstruct a series", "export a movie"}
+    assert max(gaps.values()) < bound, {k: round(v, 2) for k, v in gaps.items()}

@@ -139,7 +139,7 @@ def object_extremes(dev, voxel_um, origin_um, field_radius_um: float | None = No
     return max(-float(kept.min()), 0.0), max(float(kept.max()), 0.0)
 
 
-def result_layer(data, quantity: str, voxel_um, origin_um, *, name: str, info: dict | None = None):
+def result_layer(data, quantity: str, voxel_um, origin_um, *, name: str, info: dict | None = None, limits: bool = True):
     """Layer data tuple of a result, styled from the registry of output quantities.
 
     Parameters
@@ -154,6 +154,9 @@ def result_layer(data, quantity: str, voxel_um, origin_um, *, name: str, info: d
         Layer name stem; the quantity's label is appended.
     info : dict, optional
         Metadata kept under ``metadata['ssdpc']`` (settings, optics, source).
+    limits : bool
+        Give the contrast limits and rendering (which read the data: its first frame); False for a
+        layer that keeps its own (no data read).
 
     Returns
     -------
@@ -175,7 +178,27 @@ def result_layer(data, quantity: str, voxel_um, origin_um, *, name: str, info: d
     time = data.ndim == spatial + 1
     voxel = tuple(float(v) for v in voxel_um)[-spatial:]
     origin = tuple(float(v) for v in origin_um)[-spatial:]
-    block = np.asarray(data[0] if time else data, np.float32)
+    shown = _display(data[0] if time else data, quantity, centred, voxel, origin, info) if limits else {}
+    info.update(kind="result", quantity=quantity, unit=unit, voxel_um=list(voxel), origin_um=list(origin))
+    if "axial_fwhm_um" not in info and quantity != "psf" and (optics := _optics(info)) is not None:
+        info["axial_fwhm_um"] = axial_fwhm_um(optics)  # shown with the result: z is several times coarser
+    kwargs = {
+        "name": name if name.endswith(suffix) else f"{name} {suffix}",
+        "scale": ((1.0,) if time else ()) + voxel,
+        "translate": ((0.0,) if time else ()) + origin,
+        "axis_labels": (("t",) if time else ()) + ("z", "y", "x")[-spatial:],
+        "units": (("pixel",) if time else ()) + ("µm",) * spatial,
+        "colormap": cmap,
+        **shown,
+        "metadata": {"ssdpc": info},
+    }
+    return (data, kwargs, "image")
+
+
+def _display(frame, quantity: str, centred: bool, voxel, origin, info: dict) -> dict:
+    """Contrast limits and 3D rendering of one frame: centred on the medium (RI) or 0, spanning the
+    objects in the field (:func:`object_extremes`); else the 0.1-99.9 percentiles."""
+    block = np.asarray(frame, np.float32)
     first = block[np.isfinite(block)]  # a series still being written: its later frames are NaN
     if first.size == 0:
         first = np.zeros(1, np.float32)
@@ -194,21 +217,7 @@ def result_layer(data, quantity: str, voxel_um, origin_um, *, name: str, info: d
     else:
         lo, hi = (float(v) for v in np.percentile(first, [0.1, 99.9]))
         lims = [lo, hi if hi > lo else lo + 1e-6]
-    info.update(kind="result", quantity=quantity, unit=unit, voxel_um=list(voxel), origin_um=list(origin))
-    if "axial_fwhm_um" not in info and quantity != "psf" and (optics := _optics(info)) is not None:
-        info["axial_fwhm_um"] = axial_fwhm_um(optics)  # shown with the result: z is several times coarser
-    kwargs = {
-        "name": name if name.endswith(suffix) else f"{name} {suffix}",
-        "scale": ((1.0,) if time else ()) + voxel,
-        "translate": ((0.0,) if time else ()) + origin,
-        "axis_labels": (("t",) if time else ()) + ("z", "y", "x")[-spatial:],
-        "units": (("pixel",) if time else ()) + ("µm",) * spatial,
-        "colormap": cmap,
-        "contrast_limits": lims,
-        "rendering": rendering,
-        "metadata": {"ssdpc": info},
-    }
-    return (data, kwargs, "image")
+    return {"contrast_limits": lims, "rendering": rendering}
 
 
 def calibration_layers(cal, name: str) -> list:

@@ -287,13 +287,16 @@ def quantity_key(desc: dict, hint: str = "") -> str:
     return next((key for word, key in _WORDS if word in text), "ri")
 
 
-def read_result(path):
+def read_result(path, limits: bool = True):
     """Our OME-TIFF or OME-Zarr result as styled layers (lazy where the file allows).
 
     Parameters
     ----------
     path : str or Path
         ``.ome.tif`` or ``.zarr``.
+    limits : bool
+        Give display limits (reading the first frame); False for layers that keep theirs (a store
+        shown again as it grows: nothing is read but the metadata).
 
     Returns
     -------
@@ -301,7 +304,7 @@ def read_result(path):
     """
     p = Path(path)
     try:
-        return _read_zarr(p) if p.is_dir() else _read_tiff(p)
+        return _read_zarr(p, limits) if p.is_dir() else _read_tiff(p, limits)
     except SsdpcError:
         raise
     except Exception as e:  # our format with damaged metadata: zarr, tifffile and JSON raise many types
@@ -310,7 +313,7 @@ def read_result(path):
         ) from None
 
 
-def _read_tiff(p: Path):
+def _read_tiff(p: Path, limits: bool = True):
     info = tiff_info(p)
     desc, pixels = _our_description(info), (info.ome or {}).get("Pixels", {})
     data = open_lazy(p, squeeze=False)
@@ -324,10 +327,10 @@ def _read_tiff(p: Path):
     if q == hint or (hint == "n" and q == "delta_n"):  # OUT_phase.ome.tif, OUT_delta_n.ome.tif
         stem = stem[: -len(q) - 1]
     desc = {"name": stem, **desc, "quantity": q}
-    return _result_layers(data, axes, desc, voxel)
+    return _result_layers(data, axes, desc, voxel, limits)
 
 
-def _read_zarr(p: Path):
+def _read_zarr(p: Path, limits: bool = True):
     import dask.array as da
 
     layers = []
@@ -346,7 +349,7 @@ def _read_zarr(p: Path):
         if "translation" in tr and "origin_um" not in desc:
             desc["origin_um"] = [float(s) for a, s in zip(axes, tr["translation"]) if a in "ZYX"]
         desc = {"name": _stem(p), **desc, "quantity": quantity_key(desc, key)}
-        layers += _result_layers(data, axes, desc, voxel)
+        layers += _result_layers(data, axes, desc, voxel, limits)
     return layers
 
 
@@ -361,7 +364,7 @@ def _origin(desc: dict, shape_zyx, voxel) -> tuple:
     return (float(z0),) + tuple(-(n - 1) / 2 * d for n, d in zip(shape_zyx[1:], voxel[1:]))
 
 
-def _result_layers(data, axes: str, desc: dict, voxel):
+def _result_layers(data, axes: str, desc: dict, voxel, limits: bool = True):
     """Split channels if any, keep (T)ZYX, and style each quantity."""
     axes = axes.upper()
     if not (len(voxel) == 3 and all(math.isfinite(v) and v > 0 for v in voxel)):
@@ -377,9 +380,13 @@ def _result_layers(data, axes: str, desc: dict, voxel):
         names = desc.get("channels") or CHANNELS.get(q) or [f"{q} {k}" for k in range(data.shape[i])]
         rest = axes.replace("C", "")
         return [
-            _result_layers(data[(slice(None),) * i + (k,)], rest, {**desc, "quantity": name}, voxel)[0]
+            _result_layers(data[(slice(None),) * i + (k,)], rest, {**desc, "quantity": name}, voxel, limits)[0]
             for k, name in enumerate(names)
         ]
     shape = (1, *data.shape[-2:]) if is_map(desc.get("quantity", "ri")) else data.shape[-3:]
     origin = _origin(desc, shape, voxel)
-    return [result_layer(data, desc.get("quantity", "ri"), voxel, origin, name=desc.get("name", "volume"), info=desc)]
+    return [
+        result_layer(
+            data, desc.get("quantity", "ri"), voxel, origin, name=desc.get("name", "volume"), info=desc, limits=limits
+        )
+    ]

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import queue
 import threading
+import time
 from dataclasses import dataclass
 
 from magicgui.widgets import Label, PushButton
@@ -22,7 +23,10 @@ from napari.utils import progress as napari_progress
 from napari_ssdpc._napari import notify
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 
-__all__ = ["JobRunner", "Outcome", "Partial"]
+__all__ = ["PROGRESS_EVERY_S", "JobRunner", "Outcome", "Partial"]
+
+#: Shortest time between two progress updates on screen, s (the last step of a stage always shows).
+PROGRESS_EVERY_S = 0.25
 
 
 @dataclass
@@ -106,6 +110,7 @@ class JobRunner:
         self._pbar = None
         self._in_update = False
         self._on_partial = None
+        self._shown_at = 0.0
         cancel.enabled = False
         cancel.changed.connect(self.cancel)
 
@@ -166,8 +171,10 @@ class JobRunner:
             return
         done, total, label = msg
         pbar = self._pbar
-        if pbar is None:
-            return
+        now = time.monotonic()
+        if pbar is None or (now - self._shown_at < PROGRESS_EVERY_S and done < total):
+            return  # a repaint of napari's progress bar costs the GUI thread: a few a second are enough
+        self._shown_at = now
         self.status.value = f"{label} {done}/{total}" if total else label
         if self._in_update:  # napari's progress bar may process events while it repaints
             return

@@ -222,17 +222,35 @@ class ReconstructWidget(StepWidget):
             out = {q: (np.stack([k[0][q] for k in kept]) if series else kept[0][0][q]) for q in kept[-1][0]}
             return pipeline.reconstructor, out, kept[-1][1]
 
-        return self.runner.start(
+        self._replaced = None
+        worker = self.runner.start(
             work,
             lambda r: self._done(job, layer.name, indices, *r),
             "Reconstruct",
             on_partial=lambda r: self._first(job, layer.name, indices, *r),
         )
+        if worker is not None:
+            worker.finished.connect(self._take_back_first)
+        return worker
 
     def _first(self, job, source, indices, rec, arrays, res):
         """Show the first answer (the layers the result will replace) while the method works."""
-        self._show(source, indices, rec, arrays, res)
+        before = {lyr.name: lyr.data for lyr in self.viewer.layers}
+        _, shown = self._show(source, indices, rec, arrays, res)
+        self._replaced = {name: before.get(name) for name in shown}
         return f"{source}: first answer shown ({res.settings['first_answer']}); {rec.method.name} working…"
+
+    def _take_back_first(self) -> None:
+        """A job cancelled or failed after its first answer was shown: its layers go back to what
+        they were (removed where they are new); a first answer is never left as the result."""
+        replaced, self._replaced = self._replaced, None
+        for name, data in (replaced or {}).items():
+            if name not in self.viewer.layers:
+                continue
+            if data is None:
+                self.viewer.layers.remove(name)
+            else:
+                self.viewer.layers[name].data = data
 
     def _stream(self, layer, job, built, store: Path):
         """Every frame of a series into the OME-Zarr ``store``, shown from disk as frames finish."""
@@ -279,9 +297,9 @@ class ReconstructWidget(StepWidget):
             n = len(done_frames(store))
             if n != self.shown_frames and n > 0:
                 self.shown_frames = n
-                for data, kwargs, kind in read_result(store):
-                    if kwargs["name"] in self.viewer.layers:  # new frames: keep the display as it is
-                        kwargs = {k: v for k, v in kwargs.items() if k != "contrast_limits"}
+                names = [kw["name"] for _, kw, _ in read_result(store, limits=False)]
+                kept = all(name in self.viewer.layers for name in names)  # new frames: the display stays
+                for data, kwargs, kind in read_result(store, limits=not kept):
                     show_layer(self.viewer, data, kwargs, kind)
         if not running and self._watch is not None:
             self._watch.stop()
@@ -294,17 +312,19 @@ class ReconstructWidget(StepWidget):
         return f"{store.name}: {self.shown_frames} frames written; {resolution_text(axial_fwhm_um(rec.optics))}"
 
     def _done(self, job, source, indices, rec, arrays, res):
+        self._replaced = None  # the answer replaces the first one
         self.session.built = (job, rec)
         self.session.operators_built.emit(rec)
-        info = self._show(source, indices, rec, arrays, res)
+        info, _ = self._show(source, indices, rec, arrays, res)
         shape = next(iter(arrays.values())).shape
         return (
             f"{source}: {' × '.join(map(str, shape))} voxels of {' × '.join(f'{v:.3g}' for v in res.voxel_um)} µm; "
             f"{resolution_text(info['axial_fwhm_um'])}"
         )
 
-    def _show(self, source, indices, rec, arrays, res) -> dict:
-        """The result's layers, shown (replaced in place when they exist); returns their metadata."""
+    def _show(self, source, indices, rec, arrays, res) -> tuple[dict, list[str]]:
+        """The result's layers, shown (replaced in place when they exist); returns their metadata
+        and their names."""
         optics = rec.optics
         info = {
             "source": source,
@@ -316,7 +336,8 @@ class ReconstructWidget(StepWidget):
             "axial_fwhm_um": axial_fwhm_um(optics),
         }
         origin = (float(res.z_um[0]), float(res.y_um[0]), float(res.x_um[0]))
+        shown: list[str] = []
         for q, a in arrays.items():  # the first result is brought into view (placement.follow_results)
             data, kwargs, _ = result_layer(a, q, res.voxel_um, origin, name=source, info=info)
-            show_layer(self.viewer, data, kwargs)
-        return info
+            shown.append(show_layer(self.viewer, data, kwargs).name)
+        return info, shown
