@@ -249,8 +249,8 @@ class MultisliceSettings(SettingsModel):
 
     sphere_start: bool = Field(
         True,
-        description="when 'tv' finds a strong object, fit the objects as spheres (the bead fit) for a second start, "
-        "kept where it explains the views better than the 'tv' answer",
+        description="when the model does not explain the 'tv' answer, fit its objects as spheres (the bead fit) for "
+        "a second start, taken when it explains the views better",
     )
 
     @model_validator(mode="before")

@@ -42,7 +42,7 @@ from napari_ssdpc.physics.views_multislice import ViewsMultislice
 from napari_ssdpc.reconstruction.fit_objects import OBJECT_LEVEL, explained_limit, fit_objects, object_labels
 from napari_ssdpc.reconstruction.memory import available_memory
 from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
-from napari_ssdpc.reconstruction.methods.tv import STRONG_PHASE_RAD, TvMethod
+from napari_ssdpc.reconstruction.methods.tv import TvMethod
 from napari_ssdpc.reconstruction.nonlinear import Fit, Unknowns, discrepancy_stop, projected_gradient
 from napari_ssdpc.reconstruction.proximal import bounds
 from napari_ssdpc.reconstruction.regularised import TvState
@@ -340,10 +340,10 @@ class MultisliceMethod(PhaseMethod):
         unknowns = Unknowns(ms.refine, bk.xp)
         fit = fit_on(model, fine)
         x_start, chosen, beads = unknowns.up(x0) if fine else x0, "tv", []
-        strong = float(start.report.get("tv_phase_through_rad", 0.0)) > STRONG_PHASE_RAD
-        if ms.sphere_start and strong and noise > 0:
-            # a second start: the strong objects fitted as spheres (Chowdhury et al. 2019 start from a
-            # first-order answer; a strong bead's lies toward its focus, where the fit stays trapped)
+        if ms.sphere_start and noise > 0:
+            # the model does not explain the first answer: a second start, the objects fitted as spheres
+            # (Chowdhury et al. 2019 start from a first-order answer; a strong bead's lies toward its
+            # focus, too weak, where the fit stays trapped; 'tv' may read a small strong bead as weak)
             candidates, beads = self._sphere_start(views, dn, rows, cols, model, noise, progress, should_stop)
             best = f0
             for label, spheres in candidates.items():  # ranked by the misfit
