@@ -109,11 +109,8 @@ def solver_figure(result, path, title=""):
 
     Parameters
     ----------
-    result : Result
-    path : str or Path
-        The PNG.
-    title : str
-        Figure title; empty: none.
+    result, path, title
+        As for :func:`bead_figure`.
 
     Returns
     -------

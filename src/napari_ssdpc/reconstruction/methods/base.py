@@ -134,7 +134,8 @@ class PhaseMethod(ABC):
 
     def first_answer(self, views) -> Solution | None:
         """A quick first answer of the frame, to show while :meth:`solve` works (an iterative
-        method's start); None where the method has none quicker than its answer.
+        method's start; a refinement's, that of the method it refines); None where the method has
+        none quicker than its answer.
 
         Parameters
         ----------
@@ -144,7 +145,7 @@ class PhaseMethod(ABC):
         -------
         Solution or None
         """
-        return None
+        return None if self.start is None else self.start.first_answer(views)
 
     @classmethod
     def on(cls, start: PhaseMethod) -> PhaseMethod:

@@ -236,19 +236,6 @@ class MultisliceMethod(PhaseMethod):
         """The 'tv' method it refines."""
         return self.tv
 
-    def first_answer(self, views) -> Solution:
-        """The first answer of its 'tv' start (:meth:`TvMethod.first_answer`).
-
-        Parameters
-        ----------
-        views : ndarray, float32, (K, ny, nx)
-
-        Returns
-        -------
-        Solution
-        """
-        return self.tv.first_answer(views)
-
     def _solve(self, views, stacks, warm, progress, should_stop):
         s, v = self.setup, self.setup.views
         ms, bk = s.settings.multislice, s.backend
