@@ -22,6 +22,7 @@ reads a stale file.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import hashlib
 import json
@@ -65,6 +66,27 @@ def cache_dir() -> Path:
 def _key(*parts) -> str:
     text = json.dumps(parts, sort_keys=True, default=repr)
     return hashlib.sha1(text.encode()).hexdigest()[:10]
+
+
+#: Set when the interpreter exits: a background simulation stops within one source point (left
+#: running, it was torn down inside an FFT and napari's exit aborted: "terminate called ...").
+EXITING = threading.Event()
+_BACKGROUND: list[threading.Thread] = []
+
+
+@atexit.register
+def _stop_background() -> None:
+    EXITING.set()
+    for thread in _BACKGROUND:
+        thread.join(timeout=30.0)
+
+
+def _unless_exiting(done, total) -> None:
+    """A simulation's progress callback that ends it when the interpreter exits."""
+    if EXITING.is_set():
+        from napari_ssdpc.errors import Cancelled
+
+        raise Cancelled("napari is closing")
 
 
 _LOCKS: dict[Path, threading.Lock] = {}
@@ -285,7 +307,11 @@ def series_frame(i: int, n_frames: int = SERIES_FRAMES) -> np.ndarray:
     key = _key("moving", _physics(optics), repr(phantom), SERIES_SOURCE_STEP, 1000 + i, __version__)
     return _cached(
         f"moving_{n_frames}_{i:03d}",
-        lambda: simulate(phantom, optics, source=source, rng=np.random.default_rng(1000 + i)).frame,
+        lambda: (
+            simulate(
+                phantom, optics, source=source, rng=np.random.default_rng(1000 + i), progress=_unless_exiting
+            ).frame
+        ),
         key,
     )
 
@@ -323,6 +349,7 @@ class SeriesPrefetch:
         self._next = 0
         self._guard = threading.Lock()
         self.thread = threading.Thread(target=self._run, name="ssdpc series prefetch", daemon=True)
+        _BACKGROUND.append(self.thread)
         self.thread.start()
 
     def asked(self, i: int) -> None:
@@ -342,7 +369,7 @@ class SeriesPrefetch:
             return next((i for i in order if i not in self.made), None)
 
     def _run(self) -> None:
-        while (i := self._pick()) is not None:
+        while not EXITING.is_set() and (i := self._pick()) is not None:
             try:
                 series_frame(i, self.n_frames)
             except Exception:  # the frame is simulated again when it is read, and raises there

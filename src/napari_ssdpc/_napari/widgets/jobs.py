@@ -11,6 +11,7 @@ message, a ``SsdpcWarning`` a napari warning (once per job).
 
 from __future__ import annotations
 
+import atexit
 import queue
 import threading
 import time
@@ -36,6 +37,19 @@ class Outcome:
     value: object = None
     error: str | None = None
     cancelled: bool = False
+
+
+#: Running jobs' (thread, stop flag): stopped and joined when the interpreter exits (a job torn down
+#: inside an FFT made napari's exit abort: "terminate called without an active exception").
+_RUNNING: set[tuple[threading.Thread, threading.Event]] = set()
+
+
+@atexit.register
+def _stop_jobs() -> None:
+    for _, stop in list(_RUNNING):
+        stop.set()
+    for thread, _ in list(_RUNNING):
+        thread.join(timeout=30.0)
 
 
 @dataclass
@@ -74,6 +88,8 @@ def _relay(fn, stop: threading.Event):
             reports.put(None)
 
     thread = threading.Thread(target=target, name="napari-ssdpc job", daemon=True)
+    running = (thread, stop)
+    _RUNNING.add(running)
     thread.start()
     try:
         while (msg := reports.get()) is not None:
@@ -82,6 +98,7 @@ def _relay(fn, stop: threading.Event):
         if thread.is_alive():  # closed early: stop the core at its next iteration
             stop.set()
         thread.join()
+        _RUNNING.discard(running)
     if "error" in box:
         raise box["error"]
     return box["value"]
@@ -111,8 +128,15 @@ class JobRunner:
         self._in_update = False
         self._on_partial = None
         self._shown_at = 0.0
+        self._gone = False
         cancel.enabled = False
         cancel.changed.connect(self.cancel)
+        status.native.destroyed.connect(self._widget_gone)  # the viewer closed: its jobs stop
+
+    def _widget_gone(self, *_):
+        self._gone = True
+        if self._stop is not None:
+            self._stop.set()
 
     @property
     def running(self) -> bool:
@@ -166,6 +190,8 @@ class JobRunner:
             self.status.value = "cancelling…"
 
     def _on_progress(self, msg):
+        if self._gone:
+            return
         if isinstance(msg, Partial):
             self._show_partial(msg.value)
             return
@@ -202,7 +228,8 @@ class JobRunner:
         """napari's own cancel (worker.quit): stop the core too."""
         if self._stop is not None:
             self._stop.set()
-        self.status.value = "cancelled"
+        if not self._gone:
+            self.status.value = "cancelled"
 
     def _on_warning(self, args):
         """A warning raised while the job ran (worker.warned gives showwarning's arguments): core
@@ -213,6 +240,8 @@ class JobRunner:
             notify.warning(str(message))
 
     def _on_returned(self, out: Outcome, on_result):
+        if self._gone:
+            return
         if out.cancelled:
             self.status.value = "cancelled"
             notify.info(f"{self.title}: cancelled")
@@ -233,5 +262,6 @@ class JobRunner:
             self._pbar.close()
         self._pbar = None
         self.worker = None
-        self.run_button.enabled = True
-        self.cancel_button.enabled = False
+        if not self._gone:
+            self.run_button.enabled = True
+            self.cancel_button.enabled = False
