@@ -21,7 +21,7 @@ pytestmark = pytest.mark.slow
 
 #: The module's fixtures, the longest first (setup on 2 cores: 708, 568, 351, 336, about 300, 248,
 #: 236, 228 s): CI's slow run starts them first on its workers (tests/conftest.py).
-SLOWEST_FIRST = ("silica", "stacked", "cell", "bead", "two_beads", "weak_bead", "cache", "silica_bead")
+SLOWEST_FIRST = ("stacked", "silica", "cell", "bead", "two_beads", "weak_bead", "cache", "silica_bead")
 
 
 @pytest.fixture(scope="module")
@@ -174,10 +174,10 @@ def silica(cache):
 
 
 def test_multislice_keeps_a_strong_beads_mass_where_tv_loses_it(silica):
-    """docs/nonlinear.md: integrated Δn 0.64 x the truth with 'multislice' against 0.18 x with 'tv'
-    (which warns and names the method), its depth within 1 µm (measured +0.46), no floor over its
-    region (the whole volume 0.88 x the truth; 2.94 x before the region's edge was held at the
-    medium), stopped at 3.7 x the noise (tv: 267 x)."""
+    """docs/nonlinear.md: integrated Δn 0.97 x the truth with 'multislice' against 0.18 x with 'tv'
+    (which warns and names the method), its depth within 1 µm (measured +0.05), no floor over its
+    region (the whole volume 1.12 x the truth; 2.94 x before the region's edge was held at the
+    medium), the views explained to 2.7 x the noise (tv: 267 x)."""
     tv, ms = silica["tv"], silica["multislice"]
     assert tv[1]["integrated"] < 0.5  # the first-order model loses most of the mass
     assert any("--method multislice" in m for m in tv[3])
@@ -191,15 +191,21 @@ def test_multislice_keeps_a_strong_beads_mass_where_tv_loses_it(silica):
     assert np.allclose(bead["centre_um"][:2], 0.0, atol=0.5) and abs(bead["centre_um"][2]) < 1.5
 
 
+def test_multislice_strong_bead_mass_within_10_percent_and_no_tail(silica):
+    """docs/nonlinear.md: the start from the bead fitted as a sphere, kept (it explains the views to
+    the stop): 0.97 x the integrated Δn, tail 0.00 (from the 'tv' start: 0.64, tail 0.37)."""
+    m, s = silica["multislice"][1], silica["multislice"][0].settings
+    assert s["multislice_start"].startswith("spheres")
+    assert abs(m["integrated"] - 1.0) < 0.1 and m["tail"] < 0.1
+
+
 @pytest.mark.xfail(
     strict=True,
-    reason="measured 0.64 x the truth over the bead's disk (all planes), 0.47 x near it, tail 0.37, false Δn "
-    "0.41 x its mass: with every plane free the fit puts part of the bead at ±15 µm, where it explains the "
-    "model's error (docs/nonlinear.md)",
+    reason="measured 0.16 x the bead's mass: the 'tv' answer kept outside the model's region (15-25 µm "
+    "from the axis 0.08, beyond 0.08; docs/nonlinear.md)",
 )
-def test_multislice_strong_bead_mass_within_10_percent_and_no_tail(silica):
-    m = silica["multislice"][1]
-    assert abs(m["integrated"] - 1.0) < 0.1 and m["tail"] < 0.1 and m["false"] < 0.1
+def test_multislice_strong_bead_false_dn_below_10_percent(silica):
+    assert silica["multislice"][1]["false"] < 0.1
 
 
 @pytest.fixture(scope="module")
@@ -217,7 +223,7 @@ def stacked(cache):
 
 
 def test_multislice_keeps_both_beads_on_one_axis(stacked):
-    """docs/validation.md: 0.54 and 0.62 x each bead's mass near it (on z −30..30 µm the bead above
+    """docs/validation.md: 1.00 and 0.97 x each bead's mass near it (on z −30..30 µm the bead above
     held 0.22 x, all of it floor, when the model kept one depth window per footprint), over every
     plane."""
     res, m = stacked
@@ -225,16 +231,21 @@ def test_multislice_keeps_both_beads_on_one_axis(stacked):
     assert res.settings["multislice_z_um"] == [-20.0, 20.0]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="measured 0.54 and 0.62 x each bead's mass, depths +1.5 and −1.5 µm from the truth (drawn toward "
-    "each other and joined: the fit's report sees one object of 58 pg at z +0.6 µm for 90 pg), false Δn 0.19",
-)
 def test_multislice_stacked_beads_each_within_15_percent(stacked):
+    """docs/validation.md: both beads fitted as spheres, the start kept: 1.00 and 0.97 x each bead's
+    mass, depths +0.05 and +0.04 µm (from the 'tv' start: 0.54 and 0.62, ±1.5 µm, joined)."""
     res, m = stacked
-    assert all(abs(v - 1) < 0.15 for v in m["masses"]) and m["false"] < 0.1
+    assert all(abs(v - 1) < 0.15 for v in m["masses"])
     assert all(abs(d) < 1.0 for d in m["centroids_z_um"])
     assert len(res.settings["multislice_objects"]) == 2
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured 0.12 x the beads' mass: the 'tv' answer kept outside the model's region (docs/validation.md)",
+)
+def test_multislice_stacked_false_dn_below_10_percent(stacked):
+    assert stacked[1]["false"] < 0.1
 
 
 @pytest.fixture(scope="module")
