@@ -201,7 +201,7 @@ def test_multislice_refines_the_tv_solution_of_a_weak_bead(case, calibration, re
     opd = lambda r: r.delta_n[:, iy, ix].sum() * r.voxel_um[0]
     assert s["method"] == "multislice" and s["multislice_converged"]
     assert s["multislice_residual_over_noise"] <= 4.0
-    more = {"iterations": 3, "stop_residual_over_noise": 0.0}
+    more = {"iterations": 3, "stop_residual_over_noise": 0.0, "sphere_start": False}  # the descent from 'tv'
     config = run_config(case.optics, z=(-30, 30), dz=2, method="multislice", multislice=more)
     with pytest.warns(SsdpcWarning, match=r"did not converge in 3 iterations.*--multislice-iterations"):
         pushed_res = Reconstructor(config, calibration, flat=case.flat).reconstruct(case.frame)
@@ -397,7 +397,7 @@ def test_the_refinement_reuses_the_tv_answer_of_the_same_frame(case, calibration
     """'tv', then its multislice refinement on the same Reconstructor: no operator is rebuilt and
     'tv' is not solved again (napari and the demo refine the answer on screen); another frame, or
     a plain 'tv' run, solves anew; going back to 'tv' takes the same built method."""
-    more = {"iterations": 2, "stop_residual_over_noise": 0.0}
+    more = {"iterations": 2, "stop_residual_over_noise": 0.0, "sphere_start": False}
     rec = Reconstructor(run_config(case.optics, z=(-30, 30), dz=2, multislice=more), calibration, flat=case.flat)
     tv_method = rec.method
     first = rec.reconstruct(case.frame)
