@@ -297,9 +297,10 @@ class ReconstructWidget(StepWidget):
             n = len(done_frames(store))
             if n != self.shown_frames and n > 0:
                 self.shown_frames = n
-                names = [kw["name"] for _, kw, _ in read_result(store, limits=False)]
-                kept = all(name in self.viewer.layers for name in names)  # new frames: the display stays
-                for data, kwargs, kind in read_result(store, limits=not kept):
+                layers = read_result(store, limits=False)  # metadata only
+                if not all(kw["name"] in self.viewer.layers for _, kw, _ in layers):
+                    layers = read_result(store)  # a new layer: its display limits from the data
+                for data, kwargs, kind in layers:
                     show_layer(self.viewer, data, kwargs, kind)
         if not running and self._watch is not None:
             self._watch.stop()

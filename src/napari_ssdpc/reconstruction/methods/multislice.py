@@ -46,7 +46,7 @@ from napari_ssdpc.reconstruction.methods.tv import TvMethod
 from napari_ssdpc.reconstruction.nonlinear import Fit, Unknowns, discrepancy_stop, projected_gradient
 from napari_ssdpc.reconstruction.proximal import bounds
 from napari_ssdpc.reconstruction.regularised import TvState
-from napari_ssdpc.reconstruction.sphere_volume import spheres_volume
+from napari_ssdpc.reconstruction.sphere_start import sphere_starts
 
 __all__ = ["MultisliceMethod", "medium_edge", "object_support", "objects_roi", "unexplained_columns"]
 
@@ -57,9 +57,6 @@ SUPPORT_ROUNDS = 3
 #: A start is as good as the stop when its misfit exceeds it by less than this many standard
 #: deviations of a mean of n squared Gaussian residuals (relative: sqrt(2 / n)).
 WITHIN_STOP_SIGMAS = 3.0
-#: The sphere start clears the first answer this far around each bead's disk, µm, on every plane
-#: (a strong bead's first-order answer trails along its axis).
-SPHERE_CLEAR_UM = 2.0
 
 
 def objects_roi(dn, x_um, y_um, margin_um: float, level: float = OBJECT_LEVEL):
@@ -331,7 +328,7 @@ class MultisliceMethod(PhaseMethod):
             # the model does not explain the first answer: a second start, the objects fitted as spheres
             # (Chowdhury et al. 2019 start from a first-order answer; a strong bead's lies toward its
             # focus, too weak, where the fit stays trapped; 'tv' may read a small strong bead as weak)
-            candidates, beads = self._sphere_start(views, dn, rows, cols, model, noise, progress, should_stop)
+            candidates, beads = sphere_starts(self.setup, views, dn, (rows, cols), model, noise, progress, should_stop)
             best = f0
             for label, spheres in candidates.items():  # ranked by the misfit
                 xs = fit.project(spheres if fine else unknowns.down(spheres) / ms.refine**2)
@@ -416,45 +413,6 @@ class MultisliceMethod(PhaseMethod):
             )
         history = {**start.history, "multislice": result.history}
         return Solution((dn / to_dn).astype(np.float32), out, history, state=start.state)
-
-    def _sphere_start(self, views, dn, rows, cols, model, noise, progress, should_stop):
-        """The region's start with the beads of the first answer fitted as spheres (``ssdpc beads``).
-
-        Every bead the fit vouches for (converged, explained, apart from the others) replaces the first
-        answer in its column (its disk plus :data:`SPHERE_CLEAR_UM`, every plane) by the sphere drawn on
-        the model's grid.
-
-        Returns
-        -------
-        starts : dict
-            {'spheres': the first answer with the spheres in place of the beads, 'spheres alone':
-            the spheres in the medium}: Δn on the model's grid, (Z, k·ny, k·nx), on the backend;
-            empty when no bead qualifies.
-        beads : list of Bead
-            Those used.
-        """
-        from napari_ssdpc.reconstruction.beads import fit_beads
-
-        s, v, ms = self.setup, self.setup.views, self.setup.settings.multislice
-        found = fit_beads(
-            v, views, dn, s.z_um, noise=noise, optics=s.optics, settings=ms, backend=s.backend,
-            progress=progress, should_stop=should_stop,
-        )  # fmt: skip
-        x_um, y_um = v.x_um[cols], v.y_um[rows]
-        used = [
-            b for b in found
-            if not b.note and x_um[0] < b.centre_um[0] < x_um[-1] and y_um[0] < b.centre_um[1] < y_um[-1]
-        ]  # fmt: skip
-        if not used:
-            return {}, []
-        first = np.array(dn[:, rows, cols], np.float32)
-        for b in used:
-            reach = b.diameter_um / 2 + SPHERE_CLEAR_UM
-            first[:, np.hypot(x_um[None, :] - b.centre_um[0], y_um[:, None] - b.centre_um[1]) <= reach] = 0.0
-        rows_ = np.array([[*b.centre_um, b.diameter_um / 2, b.delta_n] for b in used])
-        drawn = s.backend.asarray(spheres_volume(rows_, model.z_um, model.y_um, model.x_um, s.dz_um).astype(np.float32))
-        rest = Unknowns(ms.refine, s.backend.xp).up(s.backend.asarray(first))
-        return {"spheres": drawn + rest, "spheres alone": drawn}, used
 
     def _model(self, rows: slice, cols: slice) -> ViewsMultislice:
         """The multislice model of the views on every plane of the output grid and the region (rows, cols):
