@@ -90,7 +90,10 @@ def test_two_beads_on_one_axis_leave_a_minimum_one_wave_away_together(synthetic_
     wrong = truth.copy()
     wrong[0, 2:5:2] += (-1.5, wave)
     wrong[1, 2] += 1.5
-    found = wave_neighbours(region, wrong, np.ones(2), optics.wavelength_um)
+    found = wave_neighbours(region, wrong, np.ones(2), optics.wavelength_um, (-12.0, 12.0))
     assert len(found) == 15 * 10  # the lower bead's Δn one wave down, kept or up; the upper's not below 0
     best = min(found, key=lambda a: a[0])[1]
     np.testing.assert_allclose(best, truth, atol=1e-6)
+    # a centre never leaves the volume's planes (z −5..5 µm here: two depths of each bead's five are in)
+    inside = wave_neighbours(region, wrong, np.ones(2), optics.wavelength_um, (-5.0, 5.0))
+    assert len(inside) == (2 * 3) * (2 * 2) and all(np.abs(p[:, 2]).max() <= 5.0 for _, p in inside)

@@ -43,15 +43,17 @@ DN_STEPS = 0.004 * 1.4 ** np.arange(14)
 #: many model pixels.
 DN_LIMIT = 0.6
 MIN_RADIUS_PX = 0.5
-#: Radii of the scan, in units of the candidate's footprint radius.
-RADIUS_STEPS = (0.6, 0.8, 1.0, 1.25, 1.6)
-#: Radii of the last grid of the scan (at the best depth), in the same units.
-RADIUS_FINE = tuple(np.geomspace(0.5, 1.6, 10))
+#: Radii of the scan, in units of the candidate's footprint radius (steps of 1.26 x). The first
+#: answer's footprint of a strong bead is no measure of it: 'tv' spread a 1.8 µm bead of 3.9 rad
+#: over a footprint of radius 7.5 µm, so the scan reaches down to a fifth of it.
+RADIUS_STEPS = tuple(np.geomspace(0.2, 1.6, 10))
+#: Radii of the last grid of the scan (at the best depth), in the same units (steps of 1.16 x).
+RADIUS_FINE = tuple(np.geomspace(0.2, 1.6, 15))
 #: Depth step of the scan, µm.
 Z_STEP_UM = 1.5
 #: Starts of the scan fitted on the coarse model.
 STARTS = 3
-#: Coarse fits fitted again on the full model (the better is kept).
+#: Coarse fits ranked again on the full model (the better is fitted there).
 FINE_STARTS = 2
 #: Rounds of scans over the beads of a region that holds several (each scanned with the others held).
 ROUNDS = 2
@@ -146,8 +148,8 @@ class BeadRegion:
         return np.asarray(self.model.bk.to_host(per), float)
 
 
-def local_fit(region: BeadRegion, spheres, sign: np.ndarray, iterations: int, should_stop=None):
-    """L-BFGS-B from the given spheres, each with its sign of Δn held.
+def local_fit(region: BeadRegion, spheres, sign: np.ndarray, iterations: int, z_range, should_stop=None):
+    """L-BFGS-B from the given spheres, each with its sign of Δn held and its centre within the volume.
 
     Parameters
     ----------
@@ -158,6 +160,8 @@ def local_fit(region: BeadRegion, spheres, sign: np.ndarray, iterations: int, sh
         +1 or −1: the sign of each sphere's Δn.
     iterations : int
         Most iterations.
+    z_range : (float, float)
+        The depths a centre may take, µm (the volume's first and last plane).
     should_stop : callable, optional
         True stops the fit (:class:`Stopped`).
 
@@ -173,7 +177,7 @@ def local_fit(region: BeadRegion, spheres, sign: np.ndarray, iterations: int, sh
     bounds = []
     for s in sign:
         dn_bounds = (0.0, DN_LIMIT) if s > 0 else (-DN_LIMIT, 0.0)
-        bounds += [(None, None)] * 3 + [(radius_min, None), tuple(v / SCALE[4] for v in dn_bounds)]
+        bounds += [(None, None)] * 2 + [tuple(z_range), (radius_min, None), tuple(v / SCALE[4] for v in dn_bounds)]
 
     def fun(q):
         if should_stop is not None and should_stop():
@@ -225,7 +229,7 @@ def _close(p, q) -> bool:
     )
 
 
-def scan_starts(region: BeadRegion, spheres, b: int, z_search_um: float, sign: float):
+def scan_starts(region: BeadRegion, spheres, b: int, z_search_um: float, sign: float, z_range):
     """Starts for sphere ``b`` (the others held): radius x Δn at its depth, depth for the best three,
     radius x Δn again at the best depth on finer radii; every (misfit, spheres) tried.
 
@@ -244,6 +248,8 @@ def scan_starts(region: BeadRegion, spheres, b: int, z_search_um: float, sign: f
         Depths tried: ± this around sphere ``b``'s, µm.
     sign : float
         Sign of its Δn.
+    z_range : (float, float)
+        The depths a centre may take, µm (the volume's first and last plane).
 
     Returns
     -------
@@ -263,12 +269,13 @@ def scan_starts(region: BeadRegion, spheres, b: int, z_search_um: float, sign: f
 
     found = grid(z0, RADIUS_STEPS)
     depths = z0 + np.arange(-z_search_um, z_search_um + 1e-9, Z_STEP_UM)
+    depths = depths[(depths >= z_range[0]) & (depths <= z_range[1])]
     found += [at(z, p[b, 3], p[b, 4]) for _, p in distinct_starts(found) for z in depths]
     best = min(found, key=lambda a: a[0])[1]
     return found + grid(best[b, 2], RADIUS_FINE)
 
 
-def wave_neighbours(region: BeadRegion, spheres, sign, wavelength_um: float):
+def wave_neighbours(region: BeadRegion, spheres, sign, wavelength_um: float, z_range):
     """Starts one wave of phase away: each sphere's Δn one wave through its centre down, kept or up,
     with its depth moved by :data:`WAVE_DEPTHS_UM`; every combination for two spheres, one sphere at
     a time (the others held) for more.
@@ -288,11 +295,13 @@ def wave_neighbours(region: BeadRegion, spheres, sign, wavelength_um: float):
     wavelength_um : float
         Vacuum wavelength, µm: a sphere of radius R delays one wave more through its centre per
         λ / 2R of Δn.
+    z_range : (float, float)
+        The depths a centre may take, µm.
 
     Returns
     -------
     list of (float, ndarray (B, 5))
-        Every (misfit, spheres) tried that the region covers.
+        Every (misfit, spheres) tried that the region covers, the centres within ``z_range``.
     """
     options = []
     for s, sg in zip(spheres, sign, strict=True):
@@ -312,7 +321,7 @@ def wave_neighbours(region: BeadRegion, spheres, sign, wavelength_um: float):
     for t in trials:
         p = spheres.copy()
         p[:, [2, 4]] = t
-        if region.covers(p):
+        if region.covers(p) and np.all((p[:, 2] >= z_range[0]) & (p[:, 2] <= z_range[1])):
             found.append((region.misfit(p), p))
     return found
 

@@ -19,8 +19,8 @@ so the fit starts from the best of a scan:
 2. on a coarse model (a source point every 0.08 NA instead of 0.03, 1 µm planes), a scan of radius
    x Δn at the candidate's depth, of depth over ± ``z_search_um`` for the best three, and of radius x
    Δn again at the best depth; the three best distinct starts are fitted on the coarse model;
-3. the best two of those are fitted on the full model (the multislice settings' sampling, 0.5 µm
-   planes), and the better is kept.
+3. the best two of those are ranked again by their misfit on the full model (the multislice
+   settings' sampling, 0.5 µm planes), and the better is fitted there.
 
 Beads whose footprints come near one another are fitted together in one region (their spheres add):
 each is scanned with the others held, twice over, and then the starts one wave of phase away for all
@@ -151,7 +151,9 @@ def fit_beads(
         The multislice model's sampling and its stop (the residual a well-explained bead reaches).
     z_search_um : float
         How far above and below the first answer's depth a bead is looked for, µm (a strong
-        bead's first-order answer lies toward its focus).
+        bead's first-order answer lies toward its focus); a bead's centre stays within the planes
+        ``z_um`` (the volume the user gave holds the sample; a sphere start beyond it could not be
+        drawn).
     min_fraction : float
         Objects of the first answer with less integrated |Δn| than this fraction of the largest's are
         not taken for beads.
@@ -178,7 +180,18 @@ def fit_beads(
     groups = overlap_groups(cands, settings.roi_margin_um)
     total = sum(2 * len(g) * (1 if len(g) == 1 else ROUNDS) + (1 if len(g) == 1 else 2) for g in groups)
     job = _GroupFit(
-        measurements, views, noise, optics, settings, z_search_um, iterations, backend, should_stop, progress, total
+        measurements,
+        views,
+        noise,
+        optics,
+        settings,
+        z_search_um,
+        (float(np.min(z_um)), float(np.max(z_um))),
+        iterations,
+        backend,
+        should_stop,
+        progress,
+        total,
     )
     out: list[Bead] = []
     try:
@@ -210,6 +223,7 @@ class _GroupFit:
     optics: Optics
     settings: MultisliceSettings
     z_search_um: float
+    z_range: tuple[float, float]
     iterations: int
     backend: Any
     should_stop: Callable[[], bool] | None
@@ -227,15 +241,20 @@ class _GroupFit:
         """The views of the region ``roi`` and their model on planes ``lo``..``hi`` every ``dz``, µm."""
         return BeadRegion(self.measurements, self.views, roi, lo, hi, dz, settings, self.backend)
 
-    def local(self, roi, start, sign, dz: float, settings):
-        """A local fit on the planes the spheres fill (again on wider ones where one moves out of them)."""
+    def around(self, roi, spheres, dz: float, settings) -> BeadRegion:
+        """The region ``roi`` on the planes the spheres fill, 2 µm beyond them."""
+        lo, hi = np.min(spheres[:, 2] - spheres[:, 3]) - 2.0, np.max(spheres[:, 2] + spheres[:, 3]) + 2.0
+        return self.region(roi, lo, hi, dz, settings)
+
+    def local(self, roi, start, sign, dz: float, settings, region: BeadRegion | None = None):
+        """A local fit on the planes the spheres fill (again on wider ones where one moves out of them);
+        ``region``: the first try's, when already built."""
         for _ in range(3):
-            lo, hi = np.min(start[:, 2] - start[:, 3]) - 2.0, np.max(start[:, 2] + start[:, 3]) + 2.0
-            region = self.region(roi, lo, hi, dz, settings)
-            p, value, converged = local_fit(region, start, sign, self.iterations, self.should_stop)
+            region = region or self.around(roi, start, dz, settings)
+            p, value, converged = local_fit(region, start, sign, self.iterations, self.z_range, self.should_stop)
             if region.covers(p):
                 break
-            start = p
+            start, region = p, None
         return p, value, converged, region
 
     def fit(self, cands) -> list[Bead]:
@@ -248,7 +267,8 @@ class _GroupFit:
         roi = square_roi(self.measurements.x_um, self.measurements.y_um, ((x0 + x1) / 2, (y0 + y1) / 2), side)
         depth = self.z_search_um + reach.max() + COARSE_DZ_UM
         coarse_settings = self.settings.replace(**COARSE)
-        lo, hi = cands[:, 2].min() - depth, cands[:, 2].max() + depth
+        lo = max(cands[:, 2].min() - depth, self.z_range[0] - reach.max() - COARSE_DZ_UM)
+        hi = min(cands[:, 2].max() + depth, self.z_range[1] + reach.max() + COARSE_DZ_UM)
         coarse = self.region(roi, lo, hi, COARSE_DZ_UM, coarse_settings)
         spheres = cands.copy()
 
@@ -256,7 +276,7 @@ class _GroupFit:
         # scans each again with the others where the first round put them
         order = [b for _ in range(1 if len(spheres) == 1 else ROUNDS) for b in range(len(spheres))]
         for b in order:
-            found = scan_starts(coarse, spheres, b, self.z_search_um, sign[b])
+            found = scan_starts(coarse, spheres, b, self.z_search_um, sign[b], self.z_range)
             self.step("beads: scanning depth, size and index")
             fits = [self.local(roi, p, sign, COARSE_DZ_UM, coarse_settings) for _, p in distinct_starts(found, STARTS)]
             fits.sort(key=lambda a: a[1])
@@ -264,15 +284,17 @@ class _GroupFit:
             self.step("beads: coarse fit")
         if len(spheres) > 1:
             # beads on one axis: the minima one wave of phase away, moved together
-            found = wave_neighbours(coarse, spheres, sign, self.optics.wavelength_um)
+            found = wave_neighbours(coarse, spheres, sign, self.optics.wavelength_um, self.z_range)
             starts = distinct_starts(found, STARTS, exclude=[f[0] for f in fits])
             fits += [self.local(roi, p, sign, COARSE_DZ_UM, coarse_settings) for _, p in starts]
             fits.sort(key=lambda a: a[1])
             self.step("beads: one wave of phase away")
-        # the coarse model's error can rank the minimum one 2π of phase away first: the best two go on
+        # the coarse model's error can rank the minimum one 2π of phase away first: the best two are
+        # ranked again on the full model (one pass each), and the better is fitted there
         last = distinct_starts([(f[1], f[0]) for f in fits], FINE_STARTS)
-        finals = [self.local(roi, p, sign, FINE_DZ_UM, self.settings) for _, p in last]
-        spheres, _, converged, fine = min(finals, key=lambda a: a[1])
+        ranked = [(self.around(roi, p, FINE_DZ_UM, self.settings), p) for _, p in last]
+        region, best = min(ranked, key=lambda a: a[0].misfit(a[1]))
+        spheres, _, converged, fine = self.local(roi, best, sign, FINE_DZ_UM, self.settings, region)
         self.step("beads: full fit")
         return _report(fine, spheres, converged, self.noise, self.optics, self.settings)
 
