@@ -70,27 +70,28 @@ def _qt_can_open_windows() -> str:
     )
 
 
-def _share_module_fixtures(items) -> None:
-    """Tests that share a module-scoped fixture (a simulated case and its reconstruction) run in one
-    worker under pytest-xdist's ``--dist loadgroup`` (CI's slow run): the fixture is made once. The
-    fixtures a module lists in ``SLOWEST_FIRST`` go first, the longest first, so that the workers
-    end together."""
-    rank = {}
-    for item in items:
-        defs = getattr(getattr(item, "_fixtureinfo", None), "name2fixturedefs", {})
-        shared = [name for name in item.fixturenames if name in defs and defs[name][-1].scope == "module"]
-        shared = [name for name in shared if name != "cache"] or shared
-        if shared:
-            item.add_marker(pytest.mark.xdist_group(f"{item.path.name}::{shared[0]}"))
-        order = tuple(getattr(getattr(item, "module", None), "SLOWEST_FIRST", ()))
-        rank[item] = order.index(shared[0]) if shared and shared[0] in order else len(order) + 1000
-    items.sort(key=lambda item: rank[item])  # stable: the others keep their order
+#: The slow modules, the longest first (their fixtures' setup on 2 quiet cores: 360, 180, 125, 195,
+#: 175 s): CI's slow run (``--dist loadfile --no-loadscope-reorder``: one worker per module, so a
+#: simulated case is made once) starts them first on its workers, so that the workers end together.
+SLOWEST_FIRST = (
+    "test_accuracy_stacked.py",
+    "test_accuracy_strong_bead.py",
+    "test_accuracy_cell.py",
+    "test_accuracy_depth.py",
+    "test_accuracy_pmma.py",
+)
+
+
+def _slowest_first(items) -> None:
+    """The modules of :data:`SLOWEST_FIRST` first, in its order (the others keep theirs)."""
+    rank = {name: i for i, name in enumerate(SLOWEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
 
 
 def pytest_collection_modifyitems(config, items):
     """Skip the napari GUI tests, with the reason, where no display can be made or Qt cannot start
-    on it (Qt would abort the whole run); group the tests of a module-scoped fixture."""
-    _share_module_fixtures(items)
+    on it (Qt would abort the whole run); the slowest modules first."""
+    _slowest_first(items)
     gui = [item for item in items if _GUI_FIXTURES & set(getattr(item, "fixturenames", ()))]
     if not gui:
         return

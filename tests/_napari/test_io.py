@@ -125,12 +125,11 @@ def test_calibration_reader_circles_and_labelled_centres(tmp_path):
     optics = Optics.paper()
     cal = calibrate(white_frame(optics, rng=np.random.default_rng(5)), optics)
     p = cal.to_json(tmp_path / "calib.json")
-    (shapes, skw, sk), (pts, pkw, pk), (arrows, vkw, vk) = _layers(p, _reader.get_calibration_reader)
+    (circles, skw, sk), (pts, pkw, pk), (arrows, vkw, vk) = _layers(p, _reader.get_calibration_reader)
     k = len(cal.lenslets)
-    assert (sk, pk) == ("shapes", "points") and skw["shape_type"] == "ellipse" and len(shapes) == k
-    centre = shapes[0].mean(axis=0)  # ellipse corners -> centre (y, x)
-    assert np.allclose(centre[::-1], cal.centres_px[0], atol=1e-9)
-    assert np.allclose(np.ptp(shapes[0], axis=0), 2 * cal.ei_radius_px)
+    assert (sk, pk) == ("points", "points") and skw["metadata"]["ssdpc"]["role"] == "EI circles"
+    assert np.allclose(circles[:, ::-1], cal.centres_px, atol=1e-9)  # (y, x) centres
+    assert skw["size"] == 2 * cal.ei_radius_px and skw["face_color"] == "transparent"
     assert pts.shape == (k + 1, 2) and np.allclose(pts[:k, ::-1], cal.centres_px)
     assert np.allclose(pts[k, ::-1], cal.grid.axis_px)
     ln = cal.lenslets[3]

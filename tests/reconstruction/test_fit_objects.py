@@ -5,7 +5,7 @@ import pytest
 
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.reconstruction.fit_objects import fit_objects
-from napari_ssdpc.reconstruction.methods.multislice import medium_edge, object_support, unexplained_columns
+from napari_ssdpc.reconstruction.multislice_region import medium_edge, object_support, unexplained_columns
 
 
 def _two_objects():

@@ -198,6 +198,7 @@ class MultisliceSettings(SettingsModel):
         }
         | {"roi_um"}
         | {"tv_weight", "stop_residual_over_noise", "model_error", "unknowns", "support_margin_um", "sphere_start"}
+        | {"rest_of_frame"}
     )
 
     iterations: int = bounded(60, 1, 500, "most gradient iterations of the refinement")
@@ -251,6 +252,11 @@ class MultisliceSettings(SettingsModel):
         True,
         description="when the model does not explain the 'tv' answer, fit its objects as spheres (the bead fit) for "
         "a second start, taken when it explains the views better",
+    )
+    rest_of_frame: bool = Field(
+        True,
+        description="when the fit replaced the 'tv' answer in its region, solve the rest of the frame again by 'tv' "
+        "with the region's modelled views taken out (outside the region, and added inside it)",
     )
 
     @model_validator(mode="before")

@@ -179,9 +179,9 @@ class LiveCamera:
         origin = (float(res.z_um[0]), float(res.y_um[0]), float(res.x_um[0]))
         info = {"source": "Micro-Manager core", "frames": [t], "settings": res.settings}
         for q, a in result_arrays(res, rc.quantities()).items():
-            data, kwargs, _ = result_layer(a, q, res.voxel_um, origin, name="camera", info=info)
-            if kwargs["name"] in rc.viewer.layers:  # a new frame: the display stays as the user left it
-                kwargs = {k: v for k, v in kwargs.items() if k != "contrast_limits"}
+            data, kwargs, _ = result_layer(a, q, res.voxel_um, origin, name="camera", info=info, limits=False)
+            if kwargs["name"] not in rc.viewer.layers:  # a later frame: the display stays as the user left it
+                data, kwargs, _ = result_layer(a, q, res.voxel_um, origin, name="camera", info=info)
             show_layer(rc.viewer, data, kwargs)
         self._shown = t
         if arrived is not None:

@@ -141,7 +141,8 @@ def calibration_layer_choices(viewer):
         return [
             (lyr.name, lyr)
             for lyr in reversed(viewer.layers)
-            if lyr.metadata.get("ssdpc", {}).get("kind") == "calibration" and lyr._type_string == "shapes"
+            if lyr.metadata.get("ssdpc", {}).get("kind") == "calibration"
+            and lyr.metadata["ssdpc"].get("role") == "EI circles"
         ]
 
     return choices

@@ -232,11 +232,9 @@ class OperatorsWidget(StepWidget):
             for i, z in enumerate(rec.z_um):
                 out.append(rec.stacks.psf.kernels(float(z))[k])
                 progress(i + 1, len(rec.z_um), "PSF")
-            return np.stack(out)
-
-        def done(stack):
+            stack = np.stack(out)
             info = {"source": f"lenslet ({ln.row}, {ln.col})", "medium_index": rec.optics.medium_index}
-            data, kwargs, _ = result_layer(
+            return result_layer(  # its display limits read the data: here, not on the GUI thread
                 stack,
                 "psf",
                 (rec.dz, rec.pixel_um, rec.pixel_um),
@@ -244,6 +242,9 @@ class OperatorsWidget(StepWidget):
                 name=f"lenslet ({ln.row}, {ln.col})",
                 info=info,
             )
+
+        def done(layer):
+            data, kwargs, _ = layer
             show_layer(self.viewer, data, kwargs)
             return f"PSF of lenslet ({ln.row}, {ln.col})"
 

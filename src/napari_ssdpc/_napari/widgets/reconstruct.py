@@ -188,7 +188,7 @@ class ReconstructWidget(StepWidget):
         except SsdpcError as e:
             notify.error(e)
             return None
-        data = layer.data
+        data, source = layer.data, layer.name
         t = frame_index(self.viewer, layer)
         series = t is not None and self.frames.value == "all frames"
         indices = list(range(data.shape[0])) if series else [t]
@@ -204,7 +204,9 @@ class ReconstructWidget(StepWidget):
             if not series:  # a quick first answer on screen while an iterative method works
                 first = pipeline.reconstructor.first_answer(todo)
                 if first is not None:
-                    progress.partial((pipeline.reconstructor, result_arrays(first, wanted), first))
+                    rec = pipeline.reconstructor
+                    shown = result_layers(source, indices, rec, result_arrays(first, wanted), first)
+                    progress.partial((rec, first, *shown))
             sink = MemorySink(keep=lambda res: (result_arrays(res, wanted), res))
             label = {"t": 0}
 
@@ -220,23 +222,25 @@ class ReconstructWidget(StepWidget):
             )
             kept = [sink.frames[i] for i in sorted(sink.frames)]
             out = {q: (np.stack([k[0][q] for k in kept]) if series else kept[0][0][q]) for q in kept[-1][0]}
-            return pipeline.reconstructor, out, kept[-1][1]
+            rec, res = pipeline.reconstructor, kept[-1][1]
+            # the display limits read the data: here, not on the GUI thread
+            return (rec, res, *result_layers(source, indices, rec, out, res))
 
         self._replaced = None
         worker = self.runner.start(
             work,
-            lambda r: self._done(job, layer.name, indices, *r),
+            lambda r: self._done(job, source, *r),
             "Reconstruct",
-            on_partial=lambda r: self._first(job, layer.name, indices, *r),
+            on_partial=lambda r: self._first(source, *r),
         )
         if worker is not None:
             worker.finished.connect(self._take_back_first)
         return worker
 
-    def _first(self, job, source, indices, rec, arrays, res):
+    def _first(self, source, rec, res, info, layers):
         """Show the first answer (the layers the result will replace) while the method works."""
         before = {lyr.name: lyr.data for lyr in self.viewer.layers}
-        _, shown = self._show(source, indices, rec, arrays, res)
+        shown = self._show(layers)
         self._replaced = {name: before.get(name) for name in shown}
         return f"{source}: first answer shown ({res.settings['first_answer']}); {rec.method.name} working…"
 
@@ -312,33 +316,54 @@ class ReconstructWidget(StepWidget):
         self.show_store(store)
         return f"{store.name}: {self.shown_frames} frames written; {resolution_text(axial_fwhm_um(rec.optics))}"
 
-    def _done(self, job, source, indices, rec, arrays, res):
+    def _done(self, job, source, rec, res, info, layers):
         self._replaced = None  # the answer replaces the first one
         self.session.built = (job, rec)
         self.session.operators_built.emit(rec)
-        info, _ = self._show(source, indices, rec, arrays, res)
-        shape = next(iter(arrays.values())).shape
+        self._show(layers)
+        shape = layers[0][0].shape
         return (
             f"{source}: {' × '.join(map(str, shape))} voxels of {' × '.join(f'{v:.3g}' for v in res.voxel_um)} µm; "
             f"{resolution_text(info['axial_fwhm_um'])}"
         )
 
-    def _show(self, source, indices, rec, arrays, res) -> tuple[dict, list[str]]:
-        """The result's layers, shown (replaced in place when they exist); returns their metadata
-        and their names."""
-        optics = rec.optics
-        info = {
-            "source": source,
-            "medium_index": optics.medium_index,
-            "wavelength_um": optics.wavelength_um,
-            "settings": res.settings,
-            "frames": [i for i in indices if i is not None],
-            "optics": optics.to_dict(),
-            "axial_fwhm_um": axial_fwhm_um(optics),
-        }
-        origin = (float(res.z_um[0]), float(res.y_um[0]), float(res.x_um[0]))
-        shown: list[str] = []
-        for q, a in arrays.items():  # the first result is brought into view (placement.follow_results)
-            data, kwargs, _ = result_layer(a, q, res.voxel_um, origin, name=source, info=info)
-            shown.append(show_layer(self.viewer, data, kwargs).name)
-        return info, shown
+    def _show(self, layers) -> list[str]:
+        """The result's layers, shown (replaced in place when they exist); returns their names. The
+        first result is brought into view (placement.follow_results)."""
+        return [show_layer(self.viewer, data, kwargs).name for data, kwargs, _ in layers]
+
+
+def result_layers(source: str, indices, rec, arrays: dict, res) -> tuple[dict, list]:
+    """The layer data of a result with their display limits (which read the data: called in the
+    worker, not on the GUI thread).
+
+    Parameters
+    ----------
+    source : str
+        The raw layer's name (the layers' name stem).
+    indices : list of int or None
+        The frames reconstructed.
+    rec : Reconstructor
+    arrays : dict
+        {quantity: array}: (z, y, x) volumes or (y, x) maps, with a leading t axis for a series.
+    res : Result
+        The (last) frame's result: its grid and settings.
+
+    Returns
+    -------
+    info : dict
+        The metadata the layers carry.
+    layers : list of (data, kwargs, 'image')
+    """
+    optics = rec.optics
+    info = {
+        "source": source,
+        "medium_index": optics.medium_index,
+        "wavelength_um": optics.wavelength_um,
+        "settings": res.settings,
+        "frames": [i for i in indices if i is not None],
+        "optics": optics.to_dict(),
+        "axial_fwhm_um": axial_fwhm_um(optics),
+    }
+    origin = (float(res.z_um[0]), float(res.y_um[0]), float(res.x_um[0]))
+    return info, [result_layer(a, q, res.voxel_um, origin, name=source, info=info) for q, a in arrays.items()]

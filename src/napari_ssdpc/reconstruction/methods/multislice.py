@@ -22,7 +22,10 @@ object that shares an axis with another, or lies deeper than 'tv' puts it, stays
 model's grid is periodic, and a Δn uniform over a plane of it is a phase delay no view sees: a band
 along the region's edge (``medium_edge_um``) is held at the medium, which ties every plane's mean
 to it (without it the sign constraint pumps that free mean into a floor of Δn over the region).
-Outside the region the 'tv' solution is kept. Every object of the region is reported with its
+When the fit replaced the 'tv' answer in the region, outside it (and added inside it) is the rest
+of the frame: 'tv' of the views with the region's modelled views taken out
+(:mod:`~napari_ssdpc.reconstruction.rest_of_frame`), not the first 'tv' solution, which spread the
+strong objects' unexplained light over the field. Every object of the region is reported with its
 centre, its dry mass and the residual of the views over it, and a warning names those the model
 does not explain.
 """
@@ -36,19 +39,26 @@ import warnings
 
 import numpy as np
 
-from napari_ssdpc.errors import SsdpcError, SsdpcWarning
-from napari_ssdpc.physics.multislice_source import square_roi
+from napari_ssdpc.errors import SsdpcWarning
 from napari_ssdpc.physics.views_multislice import ViewsMultislice
-from napari_ssdpc.reconstruction.fit_objects import OBJECT_LEVEL, explained_limit, fit_objects, object_labels
+from napari_ssdpc.reconstruction.fit_objects import fit_objects
 from napari_ssdpc.reconstruction.memory import available_memory
 from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
 from napari_ssdpc.reconstruction.methods.tv import TvMethod
+from napari_ssdpc.reconstruction.multislice_region import (
+    medium_edge,
+    object_support,
+    objects_roi,
+    region_of,
+    unexplained_columns,
+)
 from napari_ssdpc.reconstruction.nonlinear import Fit, Unknowns, discrepancy_stop, projected_gradient
 from napari_ssdpc.reconstruction.proximal import bounds
 from napari_ssdpc.reconstruction.regularised import TvState
+from napari_ssdpc.reconstruction.rest_of_frame import rest_views
 from napari_ssdpc.reconstruction.sphere_start import sphere_starts
 
-__all__ = ["MultisliceMethod", "medium_edge", "object_support", "objects_roi", "unexplained_columns"]
+__all__ = ["MultisliceMethod"]
 
 #: Stop when the relative change of Δn falls below this.
 TOLERANCE = 1e-3
@@ -57,127 +67,6 @@ SUPPORT_ROUNDS = 3
 #: A start is as good as the stop when its misfit exceeds it by less than this many standard
 #: deviations of a mean of n squared Gaussian residuals (relative: sqrt(2 / n)).
 WITHIN_STOP_SIGMAS = 3.0
-
-
-def objects_roi(dn, x_um, y_um, margin_um: float, level: float = OBJECT_LEVEL):
-    """The square region of the views' grid around the objects of a Δn volume, plus a margin.
-
-    Parameters
-    ----------
-    dn : ndarray, (Z, ny, nx)
-        Δn on the views' grid.
-    x_um, y_um : ndarray, (nx,), (ny,)
-        The grid, µm.
-    margin_um : float
-        Added on every side, µm (the light an object scatters must stay inside).
-    level : float
-        Fraction of the strongest projected |Δn| that marks an object.
-
-    Returns
-    -------
-    rows, cols : slice
-    """
-    proj = np.abs(dn).sum(axis=0)
-    on = proj >= level * proj.max() if proj.max() > 0 else np.ones(proj.shape, bool)
-    iy, ix = np.nonzero(on)
-    x0, x1, y0, y1 = x_um[ix.min()], x_um[ix.max()], y_um[iy.min()], y_um[iy.max()]
-    side = max(x1 - x0, y1 - y0) + 2 * margin_um
-    return square_roi(x_um, y_um, ((x0 + x1) / 2, (y0 + y1) / 2), side)
-
-
-def object_support(dn, voxel_um, margin_um: float) -> np.ndarray:
-    """Where a fit's objects are, grown by a margin: 1 within ``margin_um`` of an object voxel.
-
-    Parameters
-    ----------
-    dn : ndarray, (Z, ny, nx)
-        Δn of the region.
-    voxel_um : (float, float, float)
-        (dz, dy, dx), µm.
-    margin_um : float
-
-    Returns
-    -------
-    ndarray, bool, (Z, ny, nx)
-        All True when the fit has no object (nothing is held).
-    """
-    from scipy import ndimage
-
-    labels = object_labels(dn)
-    if not labels.any():
-        return np.ones(np.shape(dn), bool)
-    return ndimage.distance_transform_edt(labels == 0, sampling=voxel_um) <= margin_um
-
-
-def unexplained_columns(misfit, noise: float, stop: float, pixel_um: float, margin_um: float) -> np.ndarray:
-    """The pixels whose views a fit leaves unexplained, grown by a margin: there the data ask for Δn.
-
-    A pixel is unexplained when its mean squared residual over its 3 x 3 neighbourhood (all views)
-    exceeds twice the fit's stop (as for the objects of the report).
-
-    Parameters
-    ----------
-    misfit : ndarray, (ny, nx)
-        The squared residual per pixel, averaged over the views with data, (flat-field units)².
-    noise : float
-        The views' noise σ (0: unknown, nothing is unexplained).
-    stop : float
-        The fit's stop, residual over the noise variance.
-    pixel_um, margin_um : float
-
-    Returns
-    -------
-    ndarray, bool, (ny, nx)
-    """
-    from scipy import ndimage
-
-    if not noise > 0:
-        return np.zeros(np.shape(misfit), bool)
-    high = ndimage.uniform_filter(np.asarray(misfit, float), 3) > explained_limit(stop) * noise**2
-    grow = max(int(round(margin_um / pixel_um)), 0)
-    return ndimage.binary_dilation(high, iterations=grow) if grow and high.any() else high
-
-
-def medium_edge(side: int, pixel_um: float, edge_um: float):
-    """1 inside a square region, 0 on its edge band: there Δn is held at the medium.
-
-    The model's grid is periodic, so a Δn that is uniform over a plane of the region is a pure phase
-    delay that no view sees, and under a sign constraint the fit pumps it up into a floor; holding
-    the region's edge at the medium (Δn 0, as the real sample is around its objects) removes that
-    free mean of every plane.
-
-    Parameters
-    ----------
-    side : int
-        The region's side, unknowns.
-    pixel_um : float
-        The unknowns' lateral pixel, µm.
-    edge_um : float
-        Width of the band held at the medium, µm.
-
-    Returns
-    -------
-    ndarray, float32, (1, side, side)
-    """
-    e = int(math.ceil(edge_um / pixel_um - 1e-9))
-    if 2 * e >= side - 1:
-        raise SsdpcError(
-            f"the multislice region ({side * pixel_um:.1f} µm) leaves nothing free inside its medium edge of "
-            f"{edge_um:g} µm on each side: give a larger region (--roi) or a smaller multislice medium_edge_um"
-        )
-    out = np.zeros((1, side, side), np.float32)
-    out[:, e : side - e, e : side - e] = 1.0
-    return out
-
-
-def _roi_of(box_um, x_um, y_um):
-    x0, x1, y0, y1 = box_um
-    if x1 < x_um[0] or x0 > x_um[-1] or y1 < y_um[0] or y0 > y_um[-1]:
-        raise SsdpcError(
-            f"the region {x0:g}..{x1:g} x {y0:g}..{y1:g} µm lies outside the field of view "
-            f"({x_um[0]:.1f}..{x_um[-1]:.1f} x {y_um[0]:.1f}..{y_um[-1]:.1f} µm); give a region inside it (--roi)"
-        )
-    return square_roi(x_um, y_um, ((x0 + x1) / 2, (y0 + y1) / 2), max(x1 - x0, y1 - y0))
 
 
 def _starts_report(starts: dict, chosen: str, beads: list) -> dict:
@@ -242,7 +131,7 @@ class MultisliceMethod(PhaseMethod):
         to_dn = s.optics.wavelength_um / (2 * math.pi * s.dz_um)  # Δn = λφ/(2π dz)
         dn = np.asarray(start.phase, np.float32) * to_dn
         if ms.roi_um is not None:
-            rows, cols = _roi_of(ms.roi_um, v.x_um, v.y_um)
+            rows, cols = region_of(ms.roi_um, v.x_um, v.y_um)
         else:
             rows, cols = objects_roi(dn, v.x_um, v.y_um, ms.roi_margin_um)
         px = float(v.x_um[1] - v.x_um[0])
@@ -345,6 +234,10 @@ class MultisliceMethod(PhaseMethod):
                     history = {"objective": [fs], "relative_change": []}
                     kept = report(fit, model, xs, dn[:, rows, cols], history, True)
                     kept |= _starts_report(starts, chosen, beads)
+                    dn, rest = self._with_rest(
+                        views, dn, (rows, cols), model, fit.unknowns.up(xs), start, progress, should_stop
+                    )
+                    kept |= rest
                     return Solution(
                         (dn / to_dn).astype(np.float32),
                         kept,
@@ -388,6 +281,10 @@ class MultisliceMethod(PhaseMethod):
         dn[:, rows, cols] = bk.to_host(x)
         out = report(fit, model, result.x, dn[:, rows, cols], result.history, result.converged)
         out |= _starts_report(starts, chosen, beads)
+        if not (should_stop is not None and should_stop()):
+            volume = fit.unknowns.up(result.x)
+            dn, rest = self._with_rest(views, dn, (rows, cols), model, volume, start, progress, should_stop)
+            out |= rest
         stopped = should_stop is not None and should_stop()
         if not result.converged and not stopped:
             warnings.warn(
@@ -413,6 +310,44 @@ class MultisliceMethod(PhaseMethod):
             )
         history = {**start.history, "multislice": result.history}
         return Solution((dn / to_dn).astype(np.float32), out, history, state=start.state)
+
+    def _with_rest(self, views, dn, region, model, volume, start: Solution, progress, should_stop):
+        """The frame's Δn: the region's fit, and 'tv' of what its model leaves in the views
+        (:mod:`~napari_ssdpc.reconstruction.rest_of_frame`) outside the region and added inside it.
+
+        Parameters
+        ----------
+        views : ndarray, float32, (K, ny, nx)
+        dn : ndarray, (Z, ny, nx)
+            Δn with the region's fit in place.
+        region : (slice, slice)
+        model : ViewsMultislice
+        volume : ndarray
+            The region's Δn on the model's grid, on the backend.
+        start : Solution
+            The frame's 'tv' solution (its sign).
+        progress, should_stop : callable, optional
+
+        Returns
+        -------
+        dn : ndarray, float32, (Z, ny, nx)
+            ``dn`` itself when ``multislice.rest_of_frame`` is off.
+        report : dict
+        """
+        s = self.setup
+        if not s.settings.multislice.rest_of_frame:
+            return dn, {}
+        rows, cols = region
+        t0 = time.perf_counter()
+        predicted = model.bk.to_host(model.views(volume))
+        rest = rest_views(views, s.views.view_mask, predicted, region)
+        phase, rep = self.tv.rest(rest, _sign_of(start), progress=progress, should_stop=should_stop)
+        out = phase * (s.optics.wavelength_um / (2 * math.pi * s.dz_um))  # Δn = λφ/(2π dz)
+        out[:, rows, cols] += dn[:, rows, cols]  # what the region's fit left unexplained is kept there too
+        return out, {
+            "multislice_rest_residual_over_noise": rep.residual_over_noise,
+            "multislice_rest_seconds": time.perf_counter() - t0,
+        }
 
     def _model(self, rows: slice, cols: slice) -> ViewsMultislice:
         """The multislice model of the views on every plane of the output grid and the region (rows, cols):

@@ -117,17 +117,7 @@ class TvMethod(PhaseMethod):
         else:
             start = warm.phase if warm is not None else self.wotf.phase(contrast) * v.mask
             iterations = t.iterations
-        phi, report = self.tv.phase(
-            contrast,
-            warm=start,
-            sign=t.sign,
-            phi_max=2 * math.pi * self.setup.dz_um * t.dn_max / self.setup.optics.wavelength_um,  # Δn = λφ/(2π dz)
-            lam=t.lambda_scale,
-            iterations=iterations,
-            temporal_weight=temporal,
-            progress=None if progress is None else (lambda i, n, label="TV", *_: progress(i, n, label)),
-            should_stop=should_stop,
-        )
+        phi, report = self._phase(contrast, start, t.sign, iterations, temporal, progress, should_stop)
         history = {"tv": {"objective": report.objective, "relative_change": report.relative_change}}
         out = report.to_dict()
         out["tv_phase_through_rad"] = through = float(np.abs(np.asarray(phi).sum(axis=0)).max())
@@ -143,6 +133,48 @@ class TvMethod(PhaseMethod):
         start = None if warm is None else weakref.ref(warm)  # a series' previous frame is not kept alive
         self._last = (views, start, self.setup.settings.tv.to_dict(), solution)
         return solution
+
+    def _phase(self, contrast, start, sign: str, iterations: int, temporal: float, progress, should_stop, label=None):
+        """The ADMM solve of the views' contrast with this method's settings (its bounds and λ);
+        ``label``: the progress bar's, instead of the solver's."""
+        t = self.setup.settings.tv
+        return self.tv.phase(
+            contrast,
+            warm=start,
+            sign=sign,
+            phi_max=2 * math.pi * self.setup.dz_um * t.dn_max / self.setup.optics.wavelength_um,  # Δn = λφ/(2π dz)
+            lam=t.lambda_scale,
+            iterations=iterations,
+            temporal_weight=temporal,
+            progress=None if progress is None else (lambda i, n, lab="TV", *_: progress(i, n, label or lab)),
+            should_stop=should_stop,
+        )
+
+    def rest(self, views, sign: str, *, progress=None, should_stop=None):
+        """The phase of views from which another model took its objects out (the rest of a frame):
+        the same solve from its Tikhonov start, with the sign given (no probes), kept by no cache.
+
+        Parameters
+        ----------
+        views : ndarray, float32, (K, ny, nx)
+            Flat-fielded views, 1 where only direct light is left.
+        sign : {'denser', 'lighter', 'any'}
+            The sign the frame's own solve chose.
+        progress, should_stop : callable, optional
+            As :meth:`solve`.
+
+        Returns
+        -------
+        phase : ndarray, float32, (Z, ny, nx)
+            rad per slab.
+        report : TvReport
+        """
+        v, t = self.setup.views, self.setup.settings.tv
+        contrast = contrast_of(views, v.view_mask)
+        start = self.wotf.phase(contrast) * v.mask
+        label = "TV of the rest of the frame"
+        phi, report = self._phase(contrast, start, sign, t.iterations, 0.0, progress, should_stop, label)
+        return np.asarray(phi, np.float32), report
 
     def settings(self) -> dict:
         """The Tikhonov α of the start."""
