@@ -70,8 +70,8 @@ def _qt_can_open_windows() -> str:
     )
 
 
-#: The slow modules, the longest first (their fixtures' setup on 2 quiet cores: 360, 180, 125, 195,
-#: 175 s): CI's slow run (``--dist loadfile --no-loadscope-reorder``: one worker per module, so a
+#: The slow modules, the longest first (measured in the slow run on 2 cores, both busy: 657, 220, 207,
+#: 188, 122 s): CI's slow run (``--dist loadfile --no-loadscope-reorder``: one worker per module, so a
 #: simulated case is made once) starts them first on its workers, so that the workers end together.
 SLOWEST_FIRST = (
     "test_accuracy_stacked.py",

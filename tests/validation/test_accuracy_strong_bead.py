@@ -41,8 +41,9 @@ def silica(cache):
 def test_multislice_keeps_a_strong_beads_mass_where_tv_loses_it(silica):
     """docs/nonlinear.md: integrated Δn 0.97 x the truth with 'multislice' against 0.18 x with 'tv'
     (which warns and names the method), its depth within 1 µm (measured +0.05), no floor over its
-    region (the whole volume 1.12 x the truth; 2.94 x before the region's edge was held at the
-    medium), the views explained to 2.7 x the noise (tv: 267 x)."""
+    region (the whole volume 1.12 x the truth before the rest of the frame was solved again; 2.94 x
+    before the region's edge was held at the medium), the views explained to 2.7 x the noise (tv:
+    267 x)."""
     tv, ms = silica["tv"], silica["multislice"]
     assert tv[1]["integrated"] < 0.5  # the first-order model loses most of the mass
     assert any("--method multislice" in m for m in tv[3])
