@@ -229,6 +229,11 @@ def _close(p, q) -> bool:
     )
 
 
+def _within(z, z_range) -> np.ndarray:
+    """Which depths lie within ``z_range`` (µm, both ends included)."""
+    return (np.asarray(z) >= z_range[0]) & (np.asarray(z) <= z_range[1])
+
+
 def scan_starts(region: BeadRegion, spheres, b: int, z_search_um: float, sign: float, z_range):
     """Starts for sphere ``b`` (the others held): radius x Δn at its depth, depth for the best three,
     radius x Δn again at the best depth on finer radii; every (misfit, spheres) tried.
@@ -269,7 +274,7 @@ def scan_starts(region: BeadRegion, spheres, b: int, z_search_um: float, sign: f
 
     found = grid(z0, RADIUS_STEPS)
     depths = z0 + np.arange(-z_search_um, z_search_um + 1e-9, Z_STEP_UM)
-    depths = depths[(depths >= z_range[0]) & (depths <= z_range[1])]
+    depths = depths[_within(depths, z_range)]
     found += [at(z, p[b, 3], p[b, 4]) for _, p in distinct_starts(found) for z in depths]
     best = min(found, key=lambda a: a[0])[1]
     return found + grid(best[b, 2], RADIUS_FINE)
@@ -321,7 +326,7 @@ def wave_neighbours(region: BeadRegion, spheres, sign, wavelength_um: float, z_r
     for t in trials:
         p = spheres.copy()
         p[:, [2, 4]] = t
-        if region.covers(p) and np.all((p[:, 2] >= z_range[0]) & (p[:, 2] <= z_range[1])):
+        if region.covers(p) and np.all(_within(p[:, 2], z_range)):
             found.append((region.misfit(p), p))
     return found
 

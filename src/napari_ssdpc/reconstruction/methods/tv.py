@@ -103,7 +103,7 @@ class TvMethod(PhaseMethod):
             Its report names it (``first_answer``).
         """
         v = self.setup.views
-        phase = self.wotf.phase(contrast_of(views, v.view_mask)) * v.mask
+        phase = self._tikhonov(contrast_of(views, v.view_mask))
         return Solution(phase, {"first_answer": "Tikhonov inverse, the start of 'tv'"}, method=self.name)
 
     def _solve(self, views, stacks, warm, progress, should_stop):
@@ -115,7 +115,7 @@ class TvMethod(PhaseMethod):
             start, iterations = state, min(t.warm_iterations, t.iterations)  # never more than a cold frame
             temporal = t.temporal_weight
         else:
-            start = warm.phase if warm is not None else self.wotf.phase(contrast) * v.mask
+            start = warm.phase if warm is not None else self._tikhonov(contrast)
             iterations = t.iterations
         phi, report = self._phase(contrast, start, t.sign, iterations, temporal, progress, should_stop)
         history = {"tv": {"objective": report.objective, "relative_change": report.relative_change}}
@@ -133,6 +133,10 @@ class TvMethod(PhaseMethod):
         start = None if warm is None else weakref.ref(warm)  # a series' previous frame is not kept alive
         self._last = (views, start, self.setup.settings.tv.to_dict(), solution)
         return solution
+
+    def _tikhonov(self, contrast):
+        """The Tikhonov phase a cold solve starts from, (Z, ny, nx) rad, inside the field stop."""
+        return self.wotf.phase(contrast) * self.setup.views.mask
 
     def _phase(self, contrast, start, sign: str, iterations: int, temporal: float, progress, should_stop, label=None):
         """The ADMM solve of the views' contrast with this method's settings (its bounds and λ);
@@ -171,7 +175,7 @@ class TvMethod(PhaseMethod):
         """
         v, t = self.setup.views, self.setup.settings.tv
         contrast = contrast_of(views, v.view_mask)
-        start = self.wotf.phase(contrast) * v.mask
+        start = self._tikhonov(contrast)
         label = "TV of the rest of the frame"
         phi, report = self._phase(contrast, start, sign, t.iterations, 0.0, progress, should_stop, label)
         return np.asarray(phi, np.float32), report
