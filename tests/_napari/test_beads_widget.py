@@ -9,7 +9,7 @@ import pytest
 
 pytest.importorskip("napari")
 
-from napari_ssdpc.reconstruction.beads import Bead
+from napari_ssdpc.reconstruction.bead import Bead
 
 
 def _beads():

@@ -98,7 +98,7 @@ def test_beads_names_a_missing_calibration(cli, files, tmp_path):
 
 def test_a_bead_line_gives_its_numbers_and_its_check():
     from napari_ssdpc.cli.beads import bead_line
-    from napari_ssdpc.reconstruction.beads import Bead
+    from napari_ssdpc.reconstruction.bead import Bead
 
     good = Bead((0.01, -0.02, 4.5), 4.93, 1.4646, 0.1316, 3.0, 5.6, True, True, "", 0.105)
     line = bead_line(1, good)

@@ -2,6 +2,8 @@
 shallow and too weak is found where it is, with its size and index; a frame without objects has
 no beads."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -48,12 +50,17 @@ def test_the_candidates_are_the_objects_of_the_first_answer(frame):
     assert cands[0, 3] == pytest.approx(1.6, rel=0.35)
 
 
-def test_a_bead_is_found_at_its_depth_size_and_index(frame):
+@pytest.fixture(scope="module")
+def found(frame):
+    """The beads of the frame, searched for (no previous frame)."""
     contrast, views, dn, z_um, optics = frame
     optics = optics.replace(medium_index=1.333)
-    beads = fit_beads(contrast, views, dn, z_um, noise=NOISE, optics=optics, settings=SETTINGS, z_search_um=5.0)
-    assert len(beads) == 1
-    b = beads[0]
+    return fit_beads(contrast, views, dn, z_um, noise=NOISE, optics=optics, settings=SETTINGS, z_search_um=5.0)
+
+
+def test_a_bead_is_found_at_its_depth_size_and_index(found):
+    assert len(found) == 1
+    b = found[0]
     # the views were made on a larger region than the fit's: its periodic edge costs ~0.3 µm of depth here
     assert b.centre_um == pytest.approx(tuple(TRUTH[0, :3]), abs=0.5)
     assert b.diameter_um == pytest.approx(2 * TRUTH[0, 3], rel=0.03)
@@ -97,3 +104,34 @@ def test_two_beads_on_one_axis_leave_a_minimum_one_wave_away_together(synthetic_
     # a centre never leaves the volume's planes (z −5..5 µm here: two depths of each bead's five are in)
     inside = wave_neighbours(region, wrong, np.ones(2), optics.wavelength_um, (-5.0, 5.0))
     assert len(inside) == (2 * 3) * (2 * 2) and all(np.abs(p[:, 2]).max() <= 5.0 for _, p in inside)
+
+
+def test_a_series_fits_its_beads_from_the_previous_frames(frame, found):
+    """The bead of the previous frame (here the bead found, moved by 0.7 µm, Δn 10 % off) is the
+    start of the full fit, without the scan. When that fit explains the views much worse than the
+    previous frame's did (here the previous bead said to be explained to the noise: the frame's
+    bead may have settled in another minimum), it is not kept and the bead is searched for as in
+    a first frame; a previous bead of the other sign is another object."""
+    contrast, views, dn, z_um, optics = frame
+    kw = {"optics": optics.replace(medium_index=1.333), "settings": SETTINGS, "z_search_um": 5.0}
+    [bead] = found
+    x, y, z, r, d = TRUTH[0]
+    cases = (
+        ((-0.4, 0.3, -0.5), 1.1 * d, bead.residual_over_noise, False),
+        ((0.0, 0.0, 0.0), d, 1.0, True),
+        ((0.0, 0.0, 0.0), -d, bead.residual_over_noise, True),
+    )
+    for shift, dn_before, residual_before, searched in cases:
+        moved = tuple(c + s for c, s in zip(bead.centre_um, shift, strict=True))
+        before = replace(bead, centre_um=moved, delta_n=dn_before, residual_over_noise=residual_before)
+        stages: list[str] = []
+        [b] = fit_beads(contrast, views, dn, z_um, noise=NOISE, previous=[before], progress=_recorder(stages), **kw)
+        assert b.centre_um == pytest.approx(tuple(TRUTH[0, :3]), abs=0.5)
+        assert b.delta_n == pytest.approx(d, abs=0.002) and b.diameter_um == pytest.approx(2 * r, rel=0.03)
+        assert b.explained and b.note == ""
+        assert any("scanning" in s for s in stages) == searched, stages
+
+
+def _recorder(stages: list):
+    """A progress callback that records the stages' labels."""
+    return lambda done, total, label: stages.append(label)

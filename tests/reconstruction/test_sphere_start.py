@@ -43,6 +43,7 @@ def refined(synthetic_series):
             out["views"] = views * v.view_mask
         rec.views.measure = lambda frame, name="frame": (out["views"], 1.0)
         out[sphere_start] = rec.reconstruct(frames[0])
+        out["rec", sphere_start] = rec
     return out
 
 
@@ -62,7 +63,12 @@ def test_a_strong_bead_starts_from_its_sphere_and_keeps_its_mass(refined):
     starts = s["multislice_starts_over_noise"]
     assert starts[s["multislice_start"]] < starts["tv"]  # ranked by the misfit
     [bead] = s["multislice_start_beads"]
-    assert bead["centre_um"] == pytest.approx(tuple(TRUTH[0, :3]), abs=0.5)
+    assert bead["centre_um"][:2] == pytest.approx(tuple(TRUTH[0, :2]), abs=0.1)
+    # these few views hardly see depth: the misfit of the bead moved from z 1.0 to 1.6 µm rose by
+    # 0.01-0.02 noise variances a datum (measured on regions of 40 and 60 µm), and the fit ended
+    # anywhere in that valley from one machine's floating point to another's (1.0-1.6 µm)
+    assert bead["centre_um"][2] == pytest.approx(TRUTH[0, 2], abs=0.8)
+    assert bead["diameter_um"] * bead["delta_n"] == pytest.approx(2 * TRUTH[0, 3] * TRUTH[0, 4], rel=0.03)
     assert _mass_near(res) == pytest.approx(1.0, abs=0.1)
 
 
@@ -72,3 +78,19 @@ def test_without_the_sphere_start_the_fit_keeps_less_of_the_bead(refined):
         alone.settings["multislice_start"] == "tv" and "spheres" not in alone.settings["multislice_starts_over_noise"]
     )
     assert _mass_near(alone) < _mass_near(spheres) - 0.1
+
+
+def test_a_later_frame_fits_its_bead_from_the_previous_frames(refined, synthetic_series):
+    """A frame of a series warm-started from the previous frame's solution: its bead is fitted from
+    the previous frame's (no scan), the previous answer is ranked as a start too, and the bead
+    and its mass come out as in the first frame."""
+    first, rec = refined[True], refined["rec", True]
+    stages: list[str] = []
+    res = rec.reconstruct(synthetic_series[3][0], warm=first.solution, progress=lambda i, n, s: stages.append(s))
+    s = res.settings
+    assert not any("scanning" in label for label in stages)
+    assert any("previous frame" in label for label in stages)
+    assert "previous frame" in s["multislice_starts_over_noise"]
+    [bead] = s["multislice_start_beads"]
+    assert bead["centre_um"] == pytest.approx(first.settings["multislice_start_beads"][0]["centre_um"], abs=0.1)
+    assert _mass_near(res) == pytest.approx(_mass_near(first), abs=0.02)

@@ -1,4 +1,5 @@
-from .beads import Bead, fit_beads, measure_beads
+from .bead import Bead
+from .beads import fit_beads, measure_beads
 from .methods import METHODS, method_class
 from .methods.base import PhaseMethod, Setup, Solution
 from .reconstructor import Reconstructor, Result

@@ -34,85 +34,19 @@ the fit did not converge or the model does not explain the views there.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from dataclasses import asdict, dataclass, replace
-from typing import Any
+from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
 from napari_ssdpc.errors import Cancelled, SsdpcError
-from napari_ssdpc.physics.multislice_source import square_roi
-from napari_ssdpc.reconstruction.bead_search import (
-    COARSE,
-    COARSE_DZ_UM,
-    DN_LIMIT,
-    FINE_DZ_UM,
-    FINE_STARTS,
-    MIN_RADIUS_PX,
-    RADIUS_STEPS,
-    ROUNDS,
-    STARTS,
-    BeadRegion,
-    Stopped,
-    distinct_starts,
-    local_fit,
-    overlap_groups,
-    scan_starts,
-    wave_neighbours,
-)
+from napari_ssdpc.reconstruction.bead import Bead
+from napari_ssdpc.reconstruction.bead_groups import GroupFit, stages
+from napari_ssdpc.reconstruction.bead_search import Stopped, overlap_groups
 from napari_ssdpc.reconstruction.dpc import phase_to_delta_n
-from napari_ssdpc.reconstruction.fit_objects import around_bead, bead_candidates, explained_limit, voxel_steps
-from napari_ssdpc.reconstruction.nonlinear import discrepancy_stop
-from napari_ssdpc.settings.optics import Optics
-from napari_ssdpc.settings.reconstruction import MultisliceSettings
+from napari_ssdpc.reconstruction.fit_objects import around_bead, bead_candidates, voxel_steps
 
-__all__ = ["Bead", "fit_beads", "measure_beads"]
-
-
-@dataclass(frozen=True)
-class Bead:
-    """One fitted bead.
-
-    Attributes
-    ----------
-    centre_um : tuple of float
-        (x, y, z), µm (z > 0: farther from the objective).
-    diameter_um : float
-    ri : float
-        Its refractive index (the medium's plus Δn).
-    delta_n : float
-        Its index minus the medium's.
-    residual_over_noise : float or None
-        Mean squared residual of the views over its footprint, in noise variances.
-    stop_over_noise : float
-        The residual the model reaches on a well-explained bead (the noise and the model's error).
-    converged : bool
-        The fit ended on its convergence test.
-    explained : bool
-        The residual is within twice the stop.
-    note : str
-        What a user must know before trusting it ('' when nothing): not converged, not explained,
-        overlapping another bead.
-    first_answer_ratio : float or None
-        The voxel answer the beads were found in (e.g. 'tv'), checked against the sphere: its
-        integrated Δn around the bead
-        (:func:`~napari_ssdpc.reconstruction.fit_objects.around_bead`) over the sphere's volume x Δn.
-    """
-
-    centre_um: tuple[float, float, float]
-    diameter_um: float
-    ri: float
-    delta_n: float
-    residual_over_noise: float | None
-    stop_over_noise: float
-    converged: bool
-    explained: bool
-    note: str = ""
-    first_answer_ratio: float | None = None
-
-    def to_dict(self) -> dict:
-        """Plain numbers for JSON."""
-        return asdict(self)
+__all__ = ["fit_beads", "measure_beads"]
 
 
 def fit_beads(
@@ -127,6 +61,7 @@ def fit_beads(
     z_search_um: float = 12.0,
     min_fraction: float = 0.05,
     iterations: int = 60,
+    previous: Sequence[Bead] = (),
     backend=None,
     progress=None,
     should_stop=None,
@@ -159,6 +94,12 @@ def fit_beads(
         not taken for beads.
     iterations : int
         Most L-BFGS iterations of each fit.
+    previous : sequence of Bead
+        The beads of the previous frame of a series: a group of candidates that each lie on one
+        of them starts from them on the full model, without the scan, and keeps that fit when
+        every bead is explained and within
+        :data:`~napari_ssdpc.reconstruction.bead_groups.WARM_TOLERANCE` of its previous residual
+        (else the group is searched as in a first frame).
     backend : {'cpu', 'gpu'} or Backend, optional
     progress : callable, optional
         ``progress(done, total, label)`` after each stage (the scan, the coarse fit of every bead; the
@@ -178,8 +119,8 @@ def fit_beads(
         size = np.abs(cands[:, 4]) * cands[:, 3] ** 3
         cands = cands[size >= min_fraction * size.max()]
     groups = overlap_groups(cands, settings.roi_margin_um)
-    total = sum(2 * len(g) * (1 if len(g) == 1 else ROUNDS) + (1 if len(g) == 1 else 2) for g in groups)
-    job = _GroupFit(
+    total = sum(stages(len(g)) for g in groups)
+    job = GroupFit(
         measurements,
         views,
         noise,
@@ -192,6 +133,7 @@ def fit_beads(
         should_stop,
         progress,
         total,
+        previous=tuple(b for b in previous if not b.note),
     )
     out: list[Bead] = []
     try:
@@ -210,132 +152,6 @@ def fit_beads(
         for b in out
     ]
     return sorted(out, key=lambda b: -(b.diameter_um**3) * abs(b.delta_n))
-
-
-@dataclass
-class _GroupFit:
-    """The fit of one group of candidates after another, in one region each (the inputs of
-    :func:`fit_beads`)."""
-
-    measurements: Any
-    views: np.ndarray
-    noise: float
-    optics: Optics
-    settings: MultisliceSettings
-    z_search_um: float
-    z_range: tuple[float, float]
-    iterations: int
-    backend: Any
-    should_stop: Callable[[], bool] | None
-    progress: Callable[[int, int, str], None] | None = None
-    total: int = 0
-    done: int = 0
-
-    def step(self, label: str) -> None:
-        """One stage done: the progress bar moves on."""
-        self.done += 1
-        if self.progress is not None:
-            self.progress(self.done, self.total, label)
-
-    def region(self, roi, lo: float, hi: float, dz: float, settings) -> BeadRegion:
-        """The views of the region ``roi`` and their model on planes ``lo``..``hi`` every ``dz``, µm."""
-        return BeadRegion(self.measurements, self.views, roi, lo, hi, dz, settings, self.backend)
-
-    def around(self, roi, spheres, dz: float, settings) -> BeadRegion:
-        """The region ``roi`` on the planes the spheres fill, 2 µm beyond them."""
-        lo, hi = np.min(spheres[:, 2] - spheres[:, 3]) - 2.0, np.max(spheres[:, 2] + spheres[:, 3]) + 2.0
-        return self.region(roi, lo, hi, dz, settings)
-
-    def local(self, roi, start, sign, dz: float, settings, region: BeadRegion | None = None):
-        """A local fit on the planes the spheres fill (again on wider ones where one moves out of them);
-        ``region``: the first try's, when already built."""
-        for _ in range(3):
-            region = region or self.around(roi, start, dz, settings)
-            p, value, converged = local_fit(region, start, sign, self.iterations, self.z_range, self.should_stop)
-            if region.covers(p):
-                break
-            start, region = p, None
-        return p, value, converged, region
-
-    def fit(self, cands) -> list[Bead]:
-        """The spheres of one group of candidates, fitted together in one region."""
-        sign = np.where(cands[:, 4] < 0, -1.0, 1.0)
-        reach = RADIUS_STEPS[-1] * cands[:, 3]
-        x0, x1 = np.min(cands[:, 0] - reach), np.max(cands[:, 0] + reach)
-        y0, y1 = np.min(cands[:, 1] - reach), np.max(cands[:, 1] + reach)
-        side = max(x1 - x0, y1 - y0) + 2 * self.settings.roi_margin_um
-        roi = square_roi(self.measurements.x_um, self.measurements.y_um, ((x0 + x1) / 2, (y0 + y1) / 2), side)
-        depth = self.z_search_um + reach.max() + COARSE_DZ_UM
-        coarse_settings = self.settings.replace(**COARSE)
-        lo = max(cands[:, 2].min() - depth, self.z_range[0] - reach.max() - COARSE_DZ_UM)
-        hi = min(cands[:, 2].max() + depth, self.z_range[1] + reach.max() + COARSE_DZ_UM)
-        coarse = self.region(roi, lo, hi, COARSE_DZ_UM, coarse_settings)
-        spheres = cands.copy()
-
-        # beads that share a region are scanned one at a time with the others held; a second round
-        # scans each again with the others where the first round put them
-        order = [b for _ in range(1 if len(spheres) == 1 else ROUNDS) for b in range(len(spheres))]
-        for b in order:
-            found = scan_starts(coarse, spheres, b, self.z_search_um, sign[b], self.z_range)
-            self.step("beads: scanning depth, size and index")
-            fits = [self.local(roi, p, sign, COARSE_DZ_UM, coarse_settings) for _, p in distinct_starts(found, STARTS)]
-            fits.sort(key=lambda a: a[1])
-            spheres = fits[0][0]
-            self.step("beads: coarse fit")
-        if len(spheres) > 1:
-            # beads on one axis: the minima one wave of phase away, moved together
-            found = wave_neighbours(coarse, spheres, sign, self.optics.wavelength_um, self.z_range)
-            starts = distinct_starts(found, STARTS, exclude=[f[0] for f in fits])
-            fits += [self.local(roi, p, sign, COARSE_DZ_UM, coarse_settings) for _, p in starts]
-            fits.sort(key=lambda a: a[1])
-            self.step("beads: one wave of phase away")
-        # the coarse model's error can rank the minimum one 2π of phase away first: the best two are
-        # ranked again on the full model (one pass each), and the better is fitted there
-        last = distinct_starts([(f[1], f[0]) for f in fits], FINE_STARTS)
-        ranked = [(self.around(roi, p, FINE_DZ_UM, self.settings), p) for _, p in last]
-        region, best = min(ranked, key=lambda a: a[0].misfit(a[1]))
-        spheres, _, converged, fine = self.local(roi, best, sign, FINE_DZ_UM, self.settings, region)
-        self.step("beads: full fit")
-        return _report(fine, spheres, converged, self.noise, self.optics, self.settings)
-
-
-def _report(region: BeadRegion, spheres, converged: bool, noise: float, optics, settings) -> list[Bead]:
-    """Each sphere as a Bead, with the residual of the views over its footprint."""
-    per_pixel = region.residual_map(spheres)
-    m = region.model
-    xp = m.xp
-    contrast_map = np.asarray(
-        m.bk.to_host(
-            xp.sum(region.weight * (region.measured - 1.0) ** 2, axis=0)
-            / xp.maximum(xp.sum(region.weight, axis=0), 1.0)
-        ),
-        float,
-    )
-    tilt = optics.na / math.sqrt(optics.medium_index**2 - optics.na**2)
-    beads = []
-    for i, s in enumerate(spheres):
-        x, y, z, r, dn = (float(v) for v in s)
-        reach = r + 1.0 + abs(z) * tilt  # the bead's image in the most oblique view
-        foot = np.hypot(region.x_um[None, :] - x, region.y_um[:, None] - y) <= reach
-        ratio = float(per_pixel[foot].mean()) / noise**2 if foot.any() else None
-        stop = discrepancy_stop(settings, float(contrast_map[foot].mean()), noise)
-        explained = ratio is not None and ratio <= explained_limit(stop)
-        notes = [] if converged else ["the fit did not converge"]
-        if abs(dn) >= 0.99 * DN_LIMIT or r <= 1.01 * MIN_RADIUS_PX * m.dx:
-            notes.append("the fit ended on a bound of its Δn or radius (no bead of this frame fits as a sphere)")
-        if not explained:
-            notes.append(
-                f"the model leaves {ratio or float('nan'):.1f} x the noise over it (a bead fits to {stop:.1f})"
-            )
-        notes += [
-            f"overlaps the bead at ({o[0]:.1f}, {o[1]:.1f}, {o[2]:.1f}) µm"
-            for j, o in enumerate(spheres)
-            if j != i and math.dist(o[:3], s[:3]) < o[3] + s[3]
-        ]
-        beads.append(
-            Bead((x, y, z), 2 * r, optics.medium_index + dn, dn, ratio, stop, converged, explained, "; ".join(notes))
-        )
-    return beads
 
 
 def measure_beads(

@@ -16,7 +16,7 @@ __all__ = ["SPHERE_CLEAR_UM", "sphere_starts"]
 SPHERE_CLEAR_UM = 2.0
 
 
-def sphere_starts(setup, views, dn, region, model, noise: float, progress=None, should_stop=None):
+def sphere_starts(setup, views, dn, region, model, noise: float, previous=(), progress=None, should_stop=None):
     """The region's start with the beads of the first answer fitted as spheres (``ssdpc beads``).
 
     Every bead the fit vouches for (converged, explained, apart from the others) replaces the first
@@ -36,6 +36,9 @@ def sphere_starts(setup, views, dn, region, model, noise: float, progress=None, 
         The model of the region (its grid: ``z_um``, ``y_um``, ``x_um``).
     noise : float
         The views' noise σ.
+    previous : sequence of Bead
+        The beads the previous frame of a series started from (each group of the frame's beads on
+        them is fitted from them, without the scan).
     progress, should_stop : callable, optional
         As for :func:`~napari_ssdpc.reconstruction.beads.fit_beads`.
 
@@ -51,7 +54,7 @@ def sphere_starts(setup, views, dn, region, model, noise: float, progress=None, 
     s, v, ms = setup, setup.views, setup.settings.multislice
     rows, cols = region
     found = fit_beads(
-        v, views, dn, s.z_um, noise=noise, optics=s.optics, settings=ms, backend=s.backend,
+        v, views, dn, s.z_um, noise=noise, optics=s.optics, settings=ms, previous=previous, backend=s.backend,
         progress=progress, should_stop=should_stop,
     )  # fmt: skip
     x_um, y_um = v.x_um[cols], v.y_um[rows]

@@ -41,6 +41,7 @@ import numpy as np
 
 from napari_ssdpc.errors import SsdpcWarning
 from napari_ssdpc.physics.views_multislice import ViewsMultislice
+from napari_ssdpc.reconstruction.bead import Bead
 from napari_ssdpc.reconstruction.fit_objects import fit_objects
 from napari_ssdpc.reconstruction.memory import available_memory
 from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
@@ -70,11 +71,12 @@ WITHIN_STOP_SIGMAS = 3.0
 
 
 def _starts_report(starts: dict, chosen: str, beads: list) -> dict:
-    """The report's record of the starts: their misfits over the noise, the one taken, its beads."""
+    """The report's record of the starts: their misfits over the noise, the one taken, the beads
+    fitted for the sphere start (a series' next frame fits its beads from them)."""
     return {
         "multislice_starts_over_noise": starts,
         "multislice_start": chosen,
-        "multislice_start_beads": [b.to_dict() for b in beads] if chosen.startswith("spheres") else [],
+        "multislice_start_beads": [b.to_dict() for b in beads],
     }
 
 
@@ -212,13 +214,26 @@ class MultisliceMethod(PhaseMethod):
         fine = ms.unknowns == "model"  # sub-pixel edges: each view pixel's k x k model samples are free
         unknowns = Unknowns(ms.refine, bk.xp)
         fit = fit_on(model, fine)
-        x_start, chosen, beads = unknowns.up(x0) if fine else x0, "tv", []
+        x_start, chosen, beads, best = unknowns.up(x0) if fine else x0, "tv", [], f0
+        if warm is not None and np.shape(warm.phase) == dn.shape:
+            # a later frame of a series: the previous frame's answer is a start too (ranked by the
+            # misfit; the fit always runs from it: the sample may have moved within the stop)
+            xw = coarse.project(bk.asarray(np.asarray(warm.phase, np.float32)[:, rows, cols] * to_dn))
+            rw = coarse.residual(xw)
+            fw = 0.5 * float(bk.xp.sum(rw * rw))
+            starts["previous frame"] = over_noise(fw)
+            if fw < best:
+                x_start, chosen, best = unknowns.up(xw) if fine else xw, "previous frame", fw
         if ms.sphere_start and noise > 0:
             # the model does not explain the first answer: a second start, the objects fitted as spheres
             # (Chowdhury et al. 2019 start from a first-order answer; a strong bead's lies toward its
-            # focus, too weak, where the fit stays trapped; 'tv' may read a small strong bead as weak)
-            candidates, beads = sphere_starts(self.setup, views, dn, (rows, cols), model, noise, progress, should_stop)
-            best = f0
+            # focus, too weak, where the fit stays trapped; 'tv' may read a small strong bead as weak);
+            # a later frame of a series fits its beads from the previous frame's (no scan)
+            before = [] if warm is None else warm.report.get("multislice_start_beads", [])
+            previous = [Bead.from_dict(b) for b in before]
+            candidates, beads = sphere_starts(
+                self.setup, views, dn, (rows, cols), model, noise, previous, progress, should_stop
+            )
             for label, spheres in candidates.items():  # ranked by the misfit
                 xs = fit.project(spheres if fine else unknowns.down(spheres) / ms.refine**2)
                 rs = fit.residual(xs)
@@ -226,7 +241,7 @@ class MultisliceMethod(PhaseMethod):
                 starts[label] = over_noise(fs)
                 if fs < best:
                     x_start, chosen, best = xs, label, fs
-            if chosen != "tv":
+            if chosen.startswith("spheres"):
                 xs, fs = x_start, best
                 if fs <= within:  # the spheres explain the views: kept as they are
                     on_views = unknowns.down(xs) / ms.refine**2 if fine else xs
