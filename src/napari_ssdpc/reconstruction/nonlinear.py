@@ -226,7 +226,21 @@ class Fit:
         ----------
         x : ndarray, (Z, ny, nx) on the unknowns' grid
         """
-        return (self.model.views(self.unknowns.up(x)) - self.measured) * self.xp.sqrt(self.weight)
+        return self.views_and_residual(x)[1]
+
+    def views_and_residual(self, x):
+        """The model's views I(x) / I0 and the residual W (I(x) / I0 − m), each (K, h, w), on the backend.
+
+        Parameters
+        ----------
+        x : ndarray, (Z, ny, nx) on the unknowns' grid
+
+        Returns
+        -------
+        views, residual : ndarray
+        """
+        views = self.model.views(self.unknowns.up(x))
+        return views, (views - self.measured) * self.xp.sqrt(self.weight)
 
     def objective(self, x, with_grad: bool = True):
         """The objective at x and, with ``with_grad``, its gradient (None otherwise).

@@ -206,9 +206,14 @@ def format_report(report) -> str:
     if "multislice_frame_ok" in t:
         ms = st["multislice_case"]
         lines[-1] += (
-            f"; multislice {t['multislice_frame_s']:.0f} s a frame (<= 180: {t['multislice_frame_ok']}), "
+            f"; multislice {t['multislice_frame_s']:.0f} s a frame (<= 20: {t['multislice_frame_ok']}), "
             f"{ms['iterations']} iterations of {ms['iteration_s']:.1f} s in {ms['roi_um']:.0f} µm x "
             f"{ms['model_planes']} planes, residual {ms['residual_over_noise']:.1f} x the noise "
             f"(whole field: about {ms['whole_field_iteration_s']:.0f} s an iteration)"
+        )
+    if "multislice_warm_frame_ok" in t:
+        lines[-1] += (
+            f"; multislice warm-started {t['multislice_warm_frame_s']:.0f} s a frame "
+            f"(<= 5: {t['multislice_warm_frame_ok']}; start: {st['multislice_warm']['start']})"
         )
     return "\n".join(lines)

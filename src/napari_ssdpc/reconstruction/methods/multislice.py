@@ -70,13 +70,15 @@ SUPPORT_ROUNDS = 3
 WITHIN_STOP_SIGMAS = 3.0
 
 
-def _starts_report(starts: dict, chosen: str, beads: list) -> dict:
+def _starts_report(starts: dict, chosen: str, beads: list, seconds: float) -> dict:
     """The report's record of the starts: their misfits over the noise, the one taken, the beads
-    fitted for the sphere start (a series' next frame fits its beads from them)."""
+    fitted for the sphere start (a series' next frame fits its beads from them) and the bead
+    fit's time, s."""
     return {
         "multislice_starts_over_noise": starts,
         "multislice_start": chosen,
         "multislice_start_beads": [b.to_dict() for b in beads],
+        "multislice_sphere_start_seconds": seconds,
     }
 
 
@@ -164,9 +166,11 @@ class MultisliceMethod(PhaseMethod):
             """The squared residual per pixel of the region, averaged over the views with data, (ny, nx)."""
             return bk.to_host(bk.xp.sum(res * res, axis=0) / bk.xp.maximum(bk.xp.sum(weight, axis=0), 1.0))
 
+        predicted: dict = {}  # the model's views of the last report, for the rest of the frame
+
         def report(fit: Fit, model: ViewsMultislice, x, on_views, history, converged):
             """The report of the fit ending at x (on its unknowns' grid; ``on_views``: on the views')."""
-            res = fit.residual(x)
+            predicted["views"], res = fit.views_and_residual(x)
             sq = float(bk.xp.sum(res * res))
             per_pixel = misfit_map(res)
             objects = fit_objects(
@@ -208,13 +212,14 @@ class MultisliceMethod(PhaseMethod):
         starts = {"tv": over_noise(f0)}
         if f0 <= within:
             kept = report(coarse, model, x0, bk.to_host(x0), {"objective": [f0], "relative_change": []}, True)
-            kept |= _starts_report(starts, "tv", [])
+            kept |= _starts_report(starts, "tv", [], 0.0)
             return Solution(start.phase, kept, {**start.history, "multislice": {"objective": [f0]}}, state=start.state)
 
         fine = ms.unknowns == "model"  # sub-pixel edges: each view pixel's k x k model samples are free
         unknowns = Unknowns(ms.refine, bk.xp)
         fit = fit_on(model, fine)
         x_start, chosen, beads, best = unknowns.up(x0) if fine else x0, "tv", [], f0
+        starts_seconds = 0.0
         if warm is not None and np.shape(warm.phase) == dn.shape:
             # a later frame of a series: the previous frame's answer is a start too (ranked by the
             # misfit; the fit always runs from it: the sample may have moved within the stop)
@@ -231,9 +236,11 @@ class MultisliceMethod(PhaseMethod):
             # a later frame of a series fits its beads from the previous frame's (no scan)
             before = [] if warm is None else warm.report.get("multislice_start_beads", [])
             previous = [Bead.from_dict(b) for b in before]
+            t_beads = time.perf_counter()
             candidates, beads = sphere_starts(
                 self.setup, views, dn, (rows, cols), model, noise, previous, progress, should_stop
             )
+            starts_seconds = time.perf_counter() - t_beads
             for label, spheres in candidates.items():  # ranked by the misfit
                 xs = fit.project(spheres if fine else unknowns.down(spheres) / ms.refine**2)
                 rs = fit.residual(xs)
@@ -248,10 +255,9 @@ class MultisliceMethod(PhaseMethod):
                     dn[:, rows, cols] = bk.to_host(on_views)
                     history = {"objective": [fs], "relative_change": []}
                     kept = report(fit, model, xs, dn[:, rows, cols], history, True)
-                    kept |= _starts_report(starts, chosen, beads)
-                    dn, rest = self._with_rest(
-                        views, dn, (rows, cols), model, fit.unknowns.up(xs), start, progress, should_stop
-                    )
+                    kept |= _starts_report(starts, chosen, beads, starts_seconds)
+                    region = (rows, cols)
+                    dn, rest = self._with_rest(views, dn, region, predicted["views"], start, progress, should_stop)
                     kept |= rest
                     return Solution(
                         (dn / to_dn).astype(np.float32),
@@ -295,10 +301,9 @@ class MultisliceMethod(PhaseMethod):
             x = Unknowns(ms.refine, bk.xp).down(result.x) / ms.refine**2 if fine else result.x
         dn[:, rows, cols] = bk.to_host(x)
         out = report(fit, model, result.x, dn[:, rows, cols], result.history, result.converged)
-        out |= _starts_report(starts, chosen, beads)
+        out |= _starts_report(starts, chosen, beads, starts_seconds)
         if not (should_stop is not None and should_stop()):
-            volume = fit.unknowns.up(result.x)
-            dn, rest = self._with_rest(views, dn, (rows, cols), model, volume, start, progress, should_stop)
+            dn, rest = self._with_rest(views, dn, (rows, cols), predicted["views"], start, progress, should_stop)
             out |= rest
         stopped = should_stop is not None and should_stop()
         if not result.converged and not stopped:
@@ -326,7 +331,7 @@ class MultisliceMethod(PhaseMethod):
         history = {**start.history, "multislice": result.history}
         return Solution((dn / to_dn).astype(np.float32), out, history, state=start.state)
 
-    def _with_rest(self, views, dn, region, model, volume, start: Solution, progress, should_stop):
+    def _with_rest(self, views, dn, region, predicted, start: Solution, progress, should_stop):
         """The frame's Δn: the region's fit, and 'tv' of what its model leaves in the views
         (:mod:`~napari_ssdpc.reconstruction.rest_of_frame`) outside the region and added inside it.
 
@@ -336,9 +341,8 @@ class MultisliceMethod(PhaseMethod):
         dn : ndarray, (Z, ny, nx)
             Δn with the region's fit in place.
         region : (slice, slice)
-        model : ViewsMultislice
-        volume : ndarray
-            The region's Δn on the model's grid, on the backend.
+        predicted : ndarray, (K, h, w)
+            The model's views I / I0 of the region's Δn, on the backend (the report's).
         start : Solution
             The frame's 'tv' solution (its sign).
         progress, should_stop : callable, optional
@@ -354,8 +358,7 @@ class MultisliceMethod(PhaseMethod):
             return dn, {}
         rows, cols = region
         t0 = time.perf_counter()
-        predicted = model.bk.to_host(model.views(volume))
-        rest = rest_views(views, s.views.view_mask, predicted, region)
+        rest = rest_views(views, s.views.view_mask, s.backend.to_host(predicted), region)
         phase, rep = self.tv.rest(rest, _sign_of(start), progress=progress, should_stop=should_stop)
         out = phase * (s.optics.wavelength_um / (2 * math.pi * s.dz_um))  # Δn = λφ/(2π dz)
         out[:, rows, cols] += dn[:, rows, cols]  # what the region's fit left unexplained is kept there too
