@@ -48,6 +48,20 @@ def test_the_candidates_are_the_objects_of_the_first_answer(frame):
     assert cands.shape == (1, 5)
     assert cands[0, :3] == pytest.approx([1.2, -0.8, -1.0], abs=0.3)
     assert cands[0, 3] == pytest.approx(1.6, rel=0.35)
+    _, elongation = bead_candidates(dn, z_um, contrast.y_um, contrast.x_um, return_elongation=True)
+    assert 1.0 <= elongation[0] < 1.1  # round: 1.06, a 3.2 µm sphere drawn on 0.85 µm pixels
+
+
+def test_an_elongated_object_is_no_bead_where_round_ones_are_asked_for(frame):
+    """An ellipsoid of axes 12 x 6 x 6 µm: its footprint's long axis is twice its short one, so a
+    fit asked for round objects only leaves it (the multislice sphere start: cells are no beads)."""
+    contrast, views, _, z_um, optics = frame
+    zz, yy, xx = np.meshgrid(z_um, contrast.y_um, contrast.x_um, indexing="ij")
+    dn = 0.02 * (((xx / 6.0) ** 2 + (yy / 3.0) ** 2 + (zz / 3.0) ** 2) <= 1.0)
+    _, elongation = bead_candidates(dn, z_um, contrast.y_um, contrast.x_um, return_elongation=True)
+    assert elongation == pytest.approx([2.0], rel=0.1)
+    kw = {"noise": NOISE, "optics": optics, "settings": SETTINGS, "max_elongation": 1.3}
+    assert fit_beads(contrast, views, dn, z_um, **kw) == []
 
 
 @pytest.fixture(scope="module")

@@ -137,7 +137,7 @@ def fit_objects(dn, misfit_map, z_um, y_um, x_um, *, noise: float, alpha_um3_pg:
     return sorted(out, key=lambda o: -abs(o["dry_mass_pg"]))
 
 
-def bead_candidates(dn, z_um, y_um, x_um) -> np.ndarray:
+def bead_candidates(dn, z_um, y_um, x_um, return_elongation: bool = False):
     """The objects of a Δn volume as sphere starts (x, y, z, R, Δn).
 
     Parameters
@@ -146,12 +146,18 @@ def bead_candidates(dn, z_um, y_um, x_um) -> np.ndarray:
         A first answer (e.g. the 'tv' volume), dimensionless.
     z_um, y_um, x_um : ndarray
         Its grid, µm.
+    return_elongation : bool
+        Also return each footprint's elongation.
 
     Returns
     -------
     ndarray, (B, 5)
         The |Δn|-weighted centre, the radius of the object's footprint (the disk of its area)
         and the mean Δn of a sphere of that radius holding the object's integrated Δn; largest first.
+    elongation : ndarray, (B,)
+        With ``return_elongation``: the ratio of the footprint's long axis to its short one (the
+        square root of the ratio of its second moments; 1 for a disk: a sphere's footprint is round
+        whatever its first answer along z).
     """
     dn = np.asarray(dn, float)
     labels = object_labels(dn)
@@ -165,11 +171,24 @@ def bead_candidates(dn, z_um, y_um, x_um) -> np.ndarray:
         w = np.abs(dn[sl]) * own
         zz, yy, xx = np.meshgrid(z[sl[0]], y[sl[1]], x[sl[2]], indexing="ij")
         centre = [float(np.sum(g * w) / w.sum()) for g in (xx, yy, zz)]
-        radius = math.sqrt(own.any(axis=0).sum() * abs(y[1] - y[0]) * abs(x[1] - x[0]) / math.pi)
+        foot = own.any(axis=0)
+        radius = math.sqrt(foot.sum() * abs(y[1] - y[0]) * abs(x[1] - x[0]) / math.pi)
         integral = float(np.sum(dn[sl] * own)) * voxel
-        rows.append([*centre, radius, integral / (4 / 3 * math.pi * radius**3)])
+        shape = _elongation(w.sum(axis=0), y[sl[1]], x[sl[2]])
+        rows.append([*centre, radius, integral / (4 / 3 * math.pi * radius**3), shape])
     rows.sort(key=lambda r: -abs(r[4]) * r[3] ** 3)
-    return np.array(rows, float).reshape(-1, 5)
+    out = np.array(rows, float).reshape(-1, 6)
+    return (out[:, :5], out[:, 5]) if return_elongation else out[:, :5]
+
+
+def _elongation(weight, y, x) -> float:
+    """The long axis of an object's projected |Δn| over its short one, from its weighted second
+    moments (1 for a disk or a ring)."""
+    yy, xx = np.nonzero(weight)
+    if len(yy) < 3:
+        return 1.0
+    lo, hi = np.linalg.eigvalsh(np.cov(np.stack([x[xx], y[yy]]), aweights=weight[yy, xx]))
+    return math.sqrt(hi / lo) if lo > 0 else math.inf
 
 
 def around_bead(bead, z_um, y_um, x_um) -> np.ndarray:
