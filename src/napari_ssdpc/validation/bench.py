@@ -226,16 +226,8 @@ def run_bench(
         _, _, st["wotf_tv_case"] = fast_path(tcase, tcal, {**TV_CASE, "method": "wotf"}, device, stacks=False)
         _, tv_res, st["tv_case"] = fast_path(tcase, tcal, TV_CASE, device, stacks=False, repeats=1)
         _tv_iterations(st["tv_case"], tv_res, say)
-        say("'multislice' on the same bead, z -30..30 µm, in its region of interest")
-        ms_rec, ms_res, st["multislice_case"] = fast_path(tcase, tcal, MULTISLICE_CASE, device, stacks=False, repeats=1)
-        _multislice_iterations(st["multislice_case"], ms_res, say)
-        say(f"'multislice', the series' next frame (the bead moved by {MOVED_UM} µm), warm-started")
-        moved = simulated_case("bench-pmma-bead-moved", TV_NA, cache, center_um=MOVED_UM).frame
-        t0 = time.perf_counter()
-        warm = ms_rec.reconstruct(moved, warm=ms_res.solution)
-        st["multislice_warm"] = {"frame_s": time.perf_counter() - t0, "start": warm.settings["multislice_start"]}
-        say(f"  {st['multislice_warm']['frame_s']:.0f} s a frame (start: {st['multislice_warm']['start']})")
-        del tcase, tcal, ms_rec
+        st.update(multislice_stages(tcase, tcal, device, cache, say))
+        del tcase, tcal
         say(f"series at NA {TV_NA:g} ({TV_SERIES_FRAMES} frames of a moving sample): 'wotf', 'tv' cold and warm")
         mcase = simulated_case(f"bench-moving{TV_SERIES_FRAMES}", TV_NA, cache, frames=TV_SERIES_FRAMES)
         mcal = calibrate(mcase.white, mcase.optics)
@@ -279,6 +271,39 @@ def run_bench(
     report["machine"]["load_average_end"] = _load()
     report["targets"] = _targets(report)
     return report
+
+
+def multislice_stages(case, cal, device, cache, say) -> dict:
+    """'multislice' on the PMMA bead (z −30..30 µm, in its region), then the series' next frame of
+    the bead moved by :data:`MOVED_UM`, warm-started from the first.
+
+    Parameters
+    ----------
+    case : Case
+        The bead at condenser NA :data:`TV_NA`.
+    cal : Calibration
+    device : {'cpu', 'gpu'}
+    cache : Path
+        Folder of the simulated frames (the moved bead's is simulated there once).
+    say : callable
+        ``say(text)`` for progress lines.
+
+    Returns
+    -------
+    dict
+        ``multislice_case`` (as :func:`fast_path`, with the fit's iterations, region and a whole-field
+        estimate) and ``multislice_warm`` (the warm frame's time, s, and the start it took).
+    """
+    say("'multislice' on the same bead, z -30..30 µm, in its region of interest")
+    rec, res, cold = fast_path(case, cal, MULTISLICE_CASE, device, stacks=False, repeats=1)
+    _multislice_iterations(cold, res, say)
+    say(f"'multislice', the series' next frame (the bead moved by {MOVED_UM} µm), warm-started")
+    moved = simulated_case("bench-pmma-bead-moved", TV_NA, cache, center_um=MOVED_UM).frame
+    t0 = time.perf_counter()
+    warm = rec.reconstruct(moved, warm=res.solution)
+    out = {"frame_s": time.perf_counter() - t0, "start": warm.settings["multislice_start"]}
+    say(f"  {out['frame_s']:.0f} s a frame (start: {out['start']})")
+    return {"multislice_case": cold, "multislice_warm": out}
 
 
 def _tv_iterations(stage: dict, result, say) -> None:
