@@ -49,7 +49,7 @@ def test_the_candidates_are_the_objects_of_the_first_answer(frame):
     assert cands[0, :3] == pytest.approx([1.2, -0.8, -1.0], abs=0.3)
     assert cands[0, 3] == pytest.approx(1.6, rel=0.35)
     _, elongation = bead_candidates(dn, z_um, contrast.y_um, contrast.x_um, return_elongation=True)
-    assert 1.0 <= elongation[0] < 1.1  # round: 1.06, a 3.2 µm sphere drawn on 0.85 µm pixels
+    assert elongation[0] < 1.1  # round: 1.06, a 3.2 µm sphere drawn on 0.85 µm pixels
 
 
 def test_an_elongated_object_is_no_bead_where_round_ones_are_asked_for(frame):

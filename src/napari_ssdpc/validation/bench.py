@@ -316,7 +316,10 @@ def _tv_iterations(stage: dict, result, say) -> None:
 def _multislice_iterations(stage: dict, result, say) -> None:
     """Add the nonlinear fit's iterations, time per iteration, region and a whole-field estimate."""
     s = result.settings
-    its, seconds = int(s["multislice_iterations_run"]), float(s["multislice_seconds"])
+    its = int(s["multislice_iterations_run"])
+    # the iterations' time: without the bead fit of the sphere start and the rest of the frame's 'tv'
+    beside = float(s.get("multislice_sphere_start_seconds", 0.0)) + float(s.get("multislice_rest_seconds", 0.0))
+    seconds = float(s["multislice_seconds"]) - beside
     r0, r1, c0, c1 = s["multislice_roi_px"]
     z0, z1 = s["multislice_z_um"]
     planes = int(round((z1 - z0) / result.voxel_um[0])) + 1
