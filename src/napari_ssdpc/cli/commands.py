@@ -80,6 +80,7 @@ def cmd_calibrate(args):
         f"optical axis (x, y) = ({g.axis_px[0]:.2f}, {g.axis_px[1]:.2f}) px, pitch {g.pitch_px:.3f} px, "
         f"rotation {g.rotation_deg:+.3f} deg, {len(cal.lenslets)} lenslets"
     )
+    print(cal.optics.aberrations.summary())
     print(f"wrote {out} and {png}")
 
 

@@ -88,7 +88,7 @@ def disk_fraction(x, y, radius, pixel, supersample=8):
 
 
 def lenslet_source_weights(
-    w, spacing: float, radius: float, u_centres, pupil: Pupil, supersample=8, max_samples=250_000
+    w, spacing: float, radius: float, lenslets, pupil: Pupil, supersample=8, max_samples=250_000, centre=(0.0, 0.0)
 ):
     """Per-lenslet weights of lattice source points, so each lenslet's bright-field edge is exact.
 
@@ -109,14 +109,16 @@ def lenslet_source_weights(
         Lattice step, cycles/µm.
     radius : float
         Condenser disk radius NA_c/λ, cycles/µm.
-    u_centres : array_like, (K, 2)
-        Sub-aperture centres u_k (x, y), cycles/µm.
+    lenslets : list of Lenslet, or array_like (K, 2)
+        The lenslets (their own sub-apertures), or bare centres u_k (x, y), cycles/µm.
     pupil : Pupil
-        The objective pupil and the sub-apertures' radius.
+        The objective pupil and the sub-apertures.
     supersample : int
         Samples of the disk per lattice step.
     max_samples : int
         At most this many samples of the disk (fewer per step for a fine lattice).
+    centre : (float, float)
+        The disk's centre (x, y), cycles/µm (a condenser off axis).
 
     Returns
     -------
@@ -130,11 +132,12 @@ def lenslet_source_weights(
     t = (np.arange(-m, m) + 0.5) * h
     sx, sy = np.meshgrid(t, t)
     keep = sx * sx + sy * sy <= radius * radius
-    v = np.stack([sx[keep], sy[keep]], axis=1)
-    out = np.zeros((len(w), len(u_centres)))
-    for k, u_k in enumerate(np.asarray(u_centres, float)):
-        bright_v = pupil.subaperture(v[:, 0], v[:, 1], u_k)
-        bright_w = pupil.subaperture(w[:, 0], w[:, 1], u_k)
+    v = np.stack([sx[keep], sy[keep]], axis=1) + np.asarray(centre, float)
+    out = np.zeros((len(w), len(lenslets)))
+    for k, lenslet in enumerate(lenslets):
+        u_k, rho_k, _ = pupil.lenslet(lenslet)  # its own centre and radius
+        bright_v = pupil.subaperture(v[:, 0], v[:, 1], u_k, rho=rho_k)
+        bright_w = pupil.subaperture(w[:, 0], w[:, 1], u_k, rho=rho_k)
         for side in (True, False):
             pts = np.flatnonzero(bright_w == side)
             if not len(pts):  # no point on this side: the nearest of any side carries it
@@ -146,7 +149,7 @@ def lenslet_source_weights(
     return out
 
 
-def subaperture_windows(u_centres, pupil: Pupil, du: float, nc: int, supersample: int = 8):
+def subaperture_windows(lenslets, pupil: Pupil, du: float, nc: int, supersample: int = 8):
     """Each lenslet's sub-aperture A_k on an ``nc`` x ``nc`` crop of the lattice around u_k.
 
     The crop is centred on the lattice point nearest u_k; each cell passes the amplitude
@@ -154,10 +157,10 @@ def subaperture_windows(u_centres, pupil: Pupil, du: float, nc: int, supersample
 
     Parameters
     ----------
-    u_centres : array_like, (K, 2)
-        Sub-aperture centres u_k (x, y), cycles/µm.
+    lenslets : list of Lenslet, or array_like (K, 2)
+        The lenslets (their own sub-apertures), or bare centres u_k (x, y), cycles/µm.
     pupil : Pupil
-        The objective pupil and the sub-apertures' radius.
+        The objective pupil and the sub-apertures, with their phase.
     du : float
         Lattice step, cycles/µm.
     nc : int
@@ -169,25 +172,30 @@ def subaperture_windows(u_centres, pupil: Pupil, du: float, nc: int, supersample
     -------
     centres : ndarray, int, (K, 2)
         Lattice index (ix, iy) of each crop centre, the nearest to u_k (units of du).
-    apertures : ndarray, float32, (K, nc, nc)
-        Amplitude of A_k on the crop (rows y, columns x), in [0, 1].
+    apertures : ndarray, float32 or complex64, (K, nc, nc)
+        A_k on the crop (rows y, columns x), amplitude in [0, 1]; complex with the pupil's phase
+        where the pupil is aberrated.
     """
     off = np.arange(nc) - nc // 2
     centres, apert = [], []
-    for u_k in u_centres:
+    for lenslet in lenslets:
+        u_k, rho_k, defocus = pupil.lenslet(lenslet)  # its own centre, radius and defocus
         c = np.rint(np.asarray(u_k) / du).astype(int)
         ux, uy = (c[0] + off) * du, (c[1] + off) * du
 
-        def inside(sx, sy, u_k=u_k):
-            return pupil.subaperture(sx, sy, u_k)
+        def inside(sx, sy, u_k=u_k, rho_k=rho_k):
+            return pupil.subaperture(sx, sy, u_k, rho=rho_k)
 
         centres.append(c)
-        apert.append(np.sqrt(cell_fraction(inside, ux[None, :], uy[:, None], du, supersample)))
-    return np.array(centres), np.array(apert, dtype=np.float32)
+        a = np.sqrt(cell_fraction(inside, ux[None, :], uy[:, None], du, supersample))
+        if pupil.aberrated:  # the phase at the cell centres (the objective's and the lenslet's)
+            a = a * np.exp(1j * pupil.phase(ux[None, :], uy[:, None], u_k, rho_k, defocus or None))
+        apert.append(a)
+    return np.array(centres), np.array(apert, dtype=np.complex64 if pupil.aberrated else np.float32)
 
 
 # ---------------------------------------------------------------------------- source
-def kohler_source(radius: float, du: float, step: int = 2, supersample: int = 64):
+def kohler_source(radius: float, du: float, step: int = 2, supersample: int = 64, centre=(0.0, 0.0)):
     """Köhler illumination as plane waves on the lattice: points over the condenser disk with weights.
 
     Points every ``step`` lattice units; each is weighted by the area of its step x step cell inside
@@ -204,6 +212,8 @@ def kohler_source(radius: float, du: float, step: int = 2, supersample: int = 64
         Spacing of the points, lattice units.
     supersample : int
         Sub-cells per cell side for the cells on the disk's edge.
+    centre : (float, float)
+        The disk's centre (x, y), cycles/µm (a condenser off axis).
 
     Returns
     -------
@@ -215,11 +225,12 @@ def kohler_source(radius: float, du: float, step: int = 2, supersample: int = 64
         Area of each point's cell inside the disk, (cycles/µm)².
     """
     h = int(step)
-    m = int(math.ceil(radius / (h * du))) + 1
+    cx, cy = (float(c) for c in centre)
+    m = int(math.ceil((radius + math.hypot(cx, cy)) / (h * du))) + 1
     i = np.arange(-m, m + 1)
     gx, gy = np.meshgrid(i, i)
     ix, iy = gx.ravel(), gy.ravel()
-    wgt = disk_fraction(ix * h * du, iy * h * du, radius, h * du, supersample) * (h * du) ** 2
+    wgt = disk_fraction(ix * h * du - cx, iy * h * du - cy, radius, h * du, supersample) * (h * du) ** 2
     keep = wgt > 0
     idx = np.stack([ix[keep] * h, iy[keep] * h], axis=1)
     return idx, idx * du, wgt[keep]

@@ -221,8 +221,11 @@ def lenslet_case(optics: Optics, lenslet: Lenslet) -> str:
         'inside' (wholly inside the source disk: incoherent, no first-order phase contrast),
         'straddling' (DPC-like phase contrast) or 'outside' (dark field); docs/conventions.md.
     """
-    d = math.hypot(*lenslet.u)
-    rho, rs = optics.subaperture_radius, optics.source_radius
+    from napari_ssdpc.physics.pupil import Pupil
+
+    u_k, rho, _ = Pupil.of(optics).lenslet(lenslet)  # its own sub-aperture
+    (cx, cy), rs = optics.source_centre, optics.source_radius
+    d = math.hypot(u_k[0] - cx, u_k[1] - cy)
     if d + rho <= rs:
         return "inside"
     if d - rho >= rs:

@@ -78,7 +78,7 @@ def square_roi(x_um, y_um, centre_um=(0.0, 0.0), side_um: float = 40.0) -> tuple
     return out[0], out[1]
 
 
-def source_quadrature(optics: Optics, pupil: Pupil, u_k, h: float, q: int, edge_weights: bool = True):
+def source_quadrature(optics: Optics, pupil: Pupil, lenslets, h: float, q: int, edge_weights: bool = True):
     """Source points over the condenser disk (paper Eq. 2) on a square lattice of step h, each
     standing for q x q sub-points of its cell, with every sub-point's weight for every lenslet.
 
@@ -89,8 +89,8 @@ def source_quadrature(optics: Optics, pupil: Pupil, u_k, h: float, q: int, edge_
     ----------
     optics : Optics
     pupil : Pupil
-    u_k : ndarray, (K, 2)
-        Sub-aperture centres, cycles/µm.
+    lenslets : list of Lenslet, or ndarray (K, 2)
+        The views' lenslets (their own sub-apertures), or bare sub-aperture centres, cycles/µm.
     h : float
         Lattice step of the points, cycles/µm.
     q : int
@@ -111,16 +111,17 @@ def source_quadrature(optics: Optics, pupil: Pupil, u_k, h: float, q: int, edge_
     """
     if q < 1:
         raise SsdpcError("source_subsamples must be a positive integer")
-    _, w, _ = kohler_source(optics.source_radius, h, 1)
+    c = optics.source_centre  # the condenser disk's centre
+    _, w, _ = kohler_source(optics.source_radius, h, 1, centre=c)
     t = ((np.arange(q) + 0.5) / q - 0.5) * h
     w_sub = w[:, None] + np.stack(np.meshgrid(t, t), axis=-1).reshape(1, q * q, 2)
     flat_sub = w_sub.reshape(-1, 2)
     if edge_weights:  # (S·Q, K): each lenslet's bright-field edge sampled finely
-        wgt = lenslet_source_weights(flat_sub, h / q, optics.source_radius, u_k, pupil)
+        wgt = lenslet_source_weights(flat_sub, h / q, optics.source_radius, lenslets, pupil, centre=c)
     else:
-        cell = disk_fraction(flat_sub[:, 0], flat_sub[:, 1], optics.source_radius, h / q) * (h / q) ** 2
-        wgt = np.repeat(cell[:, None], len(u_k), axis=1)
-    return w, w_sub, wgt.reshape(len(w), q * q, len(u_k))
+        cell = disk_fraction(flat_sub[:, 0] - c[0], flat_sub[:, 1] - c[1], optics.source_radius, h / q) * (h / q) ** 2
+        wgt = np.repeat(cell[:, None], len(lenslets), axis=1)
+    return w, w_sub, wgt.reshape(len(w), q * q, len(lenslets))
 
 
 def lenslet_crops(w, w_sub, u_k, du: float, m: int, n: int):

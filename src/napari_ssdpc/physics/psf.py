@@ -39,14 +39,14 @@ import scipy.fft as sfft
 from napari_ssdpc.backend import cpu
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.geometry import nominal_lenslets
-from napari_ssdpc.physics.pupil import axial_frequency, mean_tilt, subaperture_pupil
+from napari_ssdpc.physics.pupil import Pupil, axial_frequency, mean_tilt, subaperture_pupil
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.settings.reconstruction import DEFAULT_Z_UM
 
 
-def _boxed_pupil(optics: Optics, u_k, shape, du):
-    """``subaperture_pupil`` on a small odd box, in natural order (offsets −m..m from u_k)."""
-    return tuple(np.fft.fftshift(a) for a in subaperture_pupil(optics, u_k, shape, du))
+def _boxed_pupil(optics: Optics, lenslet, shape, du):
+    """``subaperture_pupil`` on a small odd box, in natural order (offsets −m..m from its u_k)."""
+    return tuple(np.fft.fftshift(a) for a in subaperture_pupil(optics, lenslet, shape, du))
 
 
 # ------------------------------------------------------------------ fast form
@@ -115,15 +115,18 @@ class LensletPSF:
         # box around u_k that holds the sub-aperture is kept (a few % of the grid)
         self._n = sfft.next_fast_len(max(2 * self.support_px, 256))
         du = 1.0 / (self._n * self.pixel_um)
-        m = min(int(math.ceil(optics.subaperture_radius / du)) + 2, self._n // 2 - 1)
+        pupil = Pupil.of(optics)
+        centres, radii, _ = pupil.lenslet_arrays(self.lenslets)  # each lenslet's own sub-aperture
+        m = min(int(math.ceil(radii.max() / du)) + 2, self._n // 2 - 1)
         self._box = np.arange(-m, m + 1) % self._n
         shape_box = (2 * m + 1, 2 * m + 1)
-        pupils, ux, uy = zip(*(_boxed_pupil(optics, ln.u, shape_box, du) for ln in self.lenslets))
+        pupils, ux, uy = zip(*(_boxed_pupil(optics, ln, shape_box, du) for ln in self.lenslets))
         self.tilt = np.stack([mean_tilt(optics, p, a, b) for p, a, b in zip(pupils, ux, uy)])
-        self._pupil = np.stack(pupils).astype(np.float32)
+        # P_k: real for the nominal optics, complex with the optics' aberrations
+        self._pupil = np.stack(pupils).astype(np.complex64 if pupil.aberrated else np.float32)
         # parallax ramps act on the offsets from u_k; the defocus is exp(i2π z [η − η(u_k)])
         self._f = (np.arange(-m, m + 1) * du).astype(np.float32)
-        eta_k = np.array([axial_frequency(ln.u[0], ln.u[1], optics) for ln in self.lenslets])[:, None, None]
+        eta_k = axial_frequency(centres[:, 0], centres[:, 1], optics)[:, None, None]
         self._deta = (axial_frequency(np.stack(ux), np.stack(uy), optics) - eta_k).astype(np.float32)
         # the soft pupil edge is a cell average: it multiplies the amplitude by sinc(x du) sinc(y du)
         f = sfft.fftfreq(self._n)

@@ -167,8 +167,9 @@ def _pupil_field_on_mla(optics: Optics, xs, ys, dx):
     """Objective pupil imaged onto the MLA (x_mla = −λ f_obj m_r u) and η at each sample."""
     scale = optics.wavelength_um * optics.f_obj_um * optics.m_r
     ux, uy = -xs[None, :] / scale, -ys[:, None] / scale
-    pupil = Pupil.of(optics).objective(ux, uy, step=dx / scale)
-    return pupil.astype(complex), axial_frequency(ux, uy, optics)
+    full = Pupil.of(optics)
+    pupil = full.objective(ux, uy, step=dx / scale) * np.exp(1j * full.phase(ux, uy))  # the objective's aberration
+    return pupil, axial_frequency(ux, uy, optics)
 
 
 def _mla_transmittance(optics: Optics, apertures, xs, ys, dx):

@@ -89,37 +89,120 @@ def axial_frequency(ux, uy, optics: Optics) -> np.ndarray:
 class Pupil:
     """The detection pupil of every view: the objective's pupil cut by each lenslet's sub-aperture.
 
-    P_obj(u) = circ(|u| ≤ NA/λ) and A_k(u) = P_obj(u)·circ(|u − u_k| ≤ ρ) (paper Eqs. 2 and 6;
-    docs/conventions.md for u_k). The nominal optics give the ideal pupil (:meth:`of`); what a real
-    instrument adds (a phase over P_obj, each lenslet's own centre and radius) belongs here, so that
-    every model that samples the pupil sees it.
+    P_obj(u) = circ(|u| ≤ NA/λ) and A_k(u) = P_obj(u)·circ(|u − u_k| ≤ ρ_k) (paper Eqs. 2 and 6;
+    docs/conventions.md for u_k), and the complex pupil of view k
+
+        P_k(u) = A_k(u) exp(i2π [W(u) + d_k |u − u_k|² / ρ_k²])
+
+    with W the objective's wavefront (Zernike terms over |u| ≤ NA/λ, waves) and d_k the lenslet's
+    defocus (waves at its sub-aperture's edge); u_k and ρ_k are the lenslet's own centre and radius
+    (docs/aberrations.md). The nominal optics give the ideal pupil; a positive defocus term has the
+    sign of a point nearer the objective (z < 0: exp(i2π z η) falls with |u| where it rises).
 
     Attributes
     ----------
     cutoff : float
         NA/λ, the objective's cut-off, cycles/µm.
     rho : float
-        ρ, a lenslet's sub-aperture radius, cycles/µm.
+        ρ, the nominal sub-aperture radius, cycles/µm.
+    zernike : tuple of float
+        The objective's Noll coefficients from j = 1, waves.
+    lenslet_terms : tuple
+        ((row, col), (du_x, du_y), radius_scale, defocus_waves) of the lenslets that differ: the
+        centre's shift in cycles/µm.
     """
 
     cutoff: float
     rho: float
+    zernike: tuple[float, ...] = ()
+    lenslet_terms: tuple = ()
 
     @classmethod
     def of(cls, optics: Optics) -> Pupil:
-        """The pupil of the nominal optics.
+        """The pupil of the optics, with what its ``aberrations`` add.
 
         Parameters
         ----------
         optics : Optics
-            Its NA, wavelength and sub-aperture radius.
+            Its NA, wavelength, sub-aperture radius and aberrations.
 
         Returns
         -------
         Pupil
-            Ideal: no aberration, every lenslet at its nominal place.
+            Ideal where the aberrations are all zero (the default).
         """
-        return cls(float(optics.cutoff), float(optics.subaperture_radius))
+        from napari_ssdpc.physics.geometry import mla_to_frequency
+
+        ab = optics.aberrations
+        terms = tuple(
+            ((t.row, t.col), _pair(mla_to_frequency(optics, t.offset_um)), t.radius_scale, t.defocus_waves)
+            for t in ab.lenslets
+            if not t.is_nominal
+        )
+        zernike = tuple(float(c) for c in ab.objective_zernike_waves) if any(ab.objective_zernike_waves) else ()
+        return cls(float(optics.cutoff), float(optics.subaperture_radius), zernike, terms)
+
+    @property
+    def rho_max(self) -> float:
+        """The widest sub-aperture's radius, cycles/µm (ρ for the nominal array)."""
+        return self.rho * max([1.0, *(scale for _, _, scale, _ in self.lenslet_terms)])
+
+    @property
+    def aberrated(self) -> bool:
+        """Whether the pupil has a phase or a lenslet off its nominal sub-aperture."""
+        return bool(self.zernike or self.lenslet_terms)
+
+    def lenslet(self, lenslet) -> tuple[tuple[float, float], float, float]:
+        """(u_k, ρ_k, d_k) of a lenslet: its sub-aperture's centre (cycles/µm), radius (cycles/µm)
+        and defocus (waves at the edge).
+
+        Parameters
+        ----------
+        lenslet : Lenslet or array_like (2,)
+            A lenslet of the array, or a bare centre u_k (nominal terms).
+
+        Returns
+        -------
+        tuple
+        """
+        if not hasattr(lenslet, "row"):
+            return (float(lenslet[0]), float(lenslet[1])), self.rho, 0.0
+        u = (float(lenslet.u[0]), float(lenslet.u[1]))
+        for key, shift, scale, defocus in self.lenslet_terms:
+            if key == (lenslet.row, lenslet.col):
+                return (u[0] + shift[0], u[1] + shift[1]), self.rho * scale, defocus
+        return u, self.rho, 0.0
+
+    def area_fraction(self, lenslet) -> float:
+        """The area of A_k (the lenslet's own sub-aperture inside the objective's pupil) over the
+        nominal sub-aperture's, π ρ²: the lenslet's ``fraction`` for the nominal optics.
+
+        Parameters
+        ----------
+        lenslet : Lenslet or array_like (2,)
+
+        Returns
+        -------
+        float
+        """
+        from napari_ssdpc.settings.lenslets import circle_overlap_fraction
+
+        u_k, rho, _ = self.lenslet(lenslet)
+        return float(circle_overlap_fraction(math.hypot(*u_k), rho, self.cutoff)) * (rho / self.rho) ** 2
+
+    def lenslet_arrays(self, lenslets) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`lenslet` of many: u_k (K, 2), ρ_k (K,), d_k (K,).
+
+        Parameters
+        ----------
+        lenslets : list of Lenslet, or ndarray (K, 2) of bare centres
+        """
+        rows = [self.lenslet(ln) for ln in lenslets]
+        return (
+            np.array([r[0] for r in rows], float).reshape(-1, 2),
+            np.array([r[1] for r in rows], float),
+            np.array([r[2] for r in rows], float),
+        )
 
     def objective(self, ux, uy, step: float | None = None, xp=np):
         """P_obj at (ux, uy): hard-edged (bool), or with ``step`` its edge a linear ramp one sample wide.
@@ -141,8 +224,8 @@ class Pupil:
             return ux * ux + uy * uy <= self.cutoff * self.cutoff
         return soft_disk(xp.hypot(ux, uy), self.cutoff, step)
 
-    def subaperture(self, ux, uy, u_k, step: float | None = None, xp=np):
-        """A_k = P_obj · circ(|u − u_k| ≤ ρ) at (ux, uy) (hard-edged, or ramped with ``step``).
+    def subaperture(self, ux, uy, u_k, step: float | None = None, xp=np, rho=None):
+        """A_k = P_obj · circ(|u − u_k| ≤ ρ_k) at (ux, uy) (hard-edged, or ramped with ``step``).
 
         Parameters
         ----------
@@ -154,15 +237,75 @@ class Pupil:
             The sampling step, cycles/µm.
         xp : module
             NumPy or CuPy.
+        rho : float or ndarray, optional
+            The sub-aperture's radius, cycles/µm (broadcastable); default the nominal ρ.
 
         Returns
         -------
         ndarray, bool, or float in [0, 1] with ``step``
         """
+        rho = self.rho if rho is None else rho
         dx, dy = ux - u_k[0], uy - u_k[1]
         if step is None:
-            return (dx * dx + dy * dy <= self.rho * self.rho) & self.objective(ux, uy)
-        return soft_disk(xp.hypot(dx, dy), self.rho, step) * self.objective(ux, uy, step, xp)
+            return (dx * dx + dy * dy <= rho * rho) & self.objective(ux, uy)
+        return soft_disk(xp.hypot(dx, dy), rho, step) * self.objective(ux, uy, step, xp)
+
+    def phase(self, ux, uy, u_k=None, rho=None, defocus=None, xp=np):
+        """2π [W(u) + d_k |u − u_k|² / ρ_k²], the pupil's phase, rad (0 for the nominal optics).
+
+        Parameters
+        ----------
+        ux, uy : ndarray
+            Frequencies, cycles/µm (broadcastable).
+        u_k : array_like, optional
+            The sub-aperture's centre, cycles/µm (needed with ``defocus``).
+        rho : float or ndarray, optional
+            Its radius, cycles/µm; default the nominal ρ.
+        defocus : float or ndarray, optional
+            d_k, waves at the sub-aperture's edge (broadcastable); None: none.
+        xp : module
+            NumPy or CuPy.
+
+        Returns
+        -------
+        ndarray, float
+            Broadcast shape of the inputs (the objective's term is 0 beyond its cut-off).
+        """
+        from napari_ssdpc.physics.zernike import zernike_sum
+
+        waves = 0.0 * ux + 0.0 * uy
+        if self.zernike:
+            r = xp.hypot(ux, uy) / self.cutoff
+            waves = waves + xp.where(r <= 1.0, zernike_sum(self.zernike, xp.minimum(r, 1.0), xp.arctan2(uy, ux)), 0.0)
+        if defocus is not None:
+            rho = self.rho if rho is None else rho
+            waves = waves + defocus * ((ux - u_k[0]) ** 2 + (uy - u_k[1]) ** 2) / (rho * rho)
+        return (2 * math.pi) * waves
+
+    def field(self, ux, uy, lenslet, step: float | None = None, xp=np):
+        """P_k(u) = A_k(u) exp(i phase) of one lenslet: real (A_k) for the nominal optics.
+
+        Parameters
+        ----------
+        ux, uy : ndarray
+            Frequencies, cycles/µm (broadcastable).
+        lenslet : Lenslet or array_like (2,)
+            The lenslet (its own terms), or a bare centre u_k.
+        step : float, optional
+            The sampling step, cycles/µm (a ramped edge).
+        xp : module
+            NumPy or CuPy.
+
+        Returns
+        -------
+        ndarray
+            Complex where the pupil is aberrated, else as :meth:`subaperture`.
+        """
+        u_k, rho, defocus = self.lenslet(lenslet)
+        amplitude = self.subaperture(ux, uy, u_k, step, xp, rho)
+        if not self.aberrated:
+            return amplitude
+        return amplitude * xp.exp(1j * self.phase(ux, uy, u_k, rho, defocus or None, xp))
 
     def objective_cells(self, u2, du: float) -> np.ndarray:
         """P_obj on a lattice of step ``du``: every cell that touches |u| ≤ NA/λ passes (its exact,
@@ -183,16 +326,21 @@ class Pupil:
         return (u2 <= (self.cutoff + du / math.sqrt(2)) ** 2).astype(np.float32)
 
 
-def subaperture_pupil(optics: Optics, u_k, shape, du):
-    """P_k = P_obj·circ(|u − u_k| ≤ ρ) on the grid u = u_k + fftfreq (unshifted FFT order).
+def _pair(v) -> tuple[float, float]:
+    return float(v[0]), float(v[1])
 
-    The lenslet's sub-aperture of the objective pupil (paper Eq. 2), sampled around its centre.
+
+def subaperture_pupil(optics: Optics, lenslet, shape, du):
+    """P_k(u) of a lenslet (:meth:`Pupil.field`) on the grid u = u_k + fftfreq (unshifted FFT order).
+
+    The lenslet's sub-aperture of the objective pupil (paper Eq. 2) with the optics' aberrations,
+    sampled around its own centre u_k.
 
     Parameters
     ----------
     optics : Optics
-    u_k : array_like, shape (2,)
-        The sub-aperture's centre (x, y), cycles/µm.
+    lenslet : Lenslet or array_like, shape (2,)
+        The lenslet, or a bare sub-aperture centre (x, y), cycles/µm (nominal terms).
     shape : tuple of int
         (ny, nx) samples.
     du : float or array_like, shape (2,)
@@ -201,17 +349,19 @@ def subaperture_pupil(optics: Optics, u_k, shape, du):
     Returns
     -------
     P : ndarray, shape (ny, nx)
-        The pupil amplitude in [0, 1].
+        The pupil: its amplitude in [0, 1], real for the nominal optics, complex where aberrated.
     ux, uy : ndarray
         The absolute frequencies, cycles/µm, broadcastable to ``shape``.
     """
     ny, nx = shape
     d = np.broadcast_to(np.asarray(du, dtype=float), (2,))  # a scalar step or (du_y, du_x)
     duy, dux = float(d[0]), float(d[1])
+    pupil = Pupil.of(optics)
+    u_k = pupil.lenslet(lenslet)[0]
     fy = sfft.fftfreq(ny, 1.0 / (ny * duy))[:, None]
     fx = sfft.fftfreq(nx, 1.0 / (nx * dux))[None, :]
     ux, uy = u_k[0] + fx, u_k[1] + fy
-    return Pupil.of(optics).subaperture(ux, uy, u_k, step=math.sqrt(dux * duy)), ux, uy
+    return pupil.field(ux, uy, lenslet, step=math.sqrt(dux * duy)), ux, uy
 
 
 def mean_tilt(optics: Optics, pupil, ux, uy) -> np.ndarray:

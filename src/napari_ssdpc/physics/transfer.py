@@ -189,13 +189,14 @@ class LensletSetup:
             raise SsdpcError(f"oversample must be >= 1, got {oversample}")
         coarse = _frequency_steps(self.shape, pixel_um)
         self.du = du = tuple(d / r for d in coarse)
-        rho = optics.subaperture_radius
+        rho = float(Pupil.of(optics).lenslet_arrays(self.lenslets)[1].max())  # the widest sub-aperture
         m_in = tuple(2 * int(math.ceil(rho / d)) + 4 for d in du)
         self.m_out = tuple(min(n, 2 * int(math.ceil(2 * rho / d)) + 3) for n, d in zip(self.shape, coarse))
         src, pup, eta = [], [], []
         for ln in self.lenslets:
-            p, ux, uy = subaperture_pupil(optics, ln.u, m_in, du)
-            src.append(soft_disk(np.hypot(ux, uy), optics.source_radius, math.sqrt(du[0] * du[1])))
+            p, ux, uy = subaperture_pupil(optics, ln, m_in, du)  # P_k with the optics' aberrations
+            cx, cy = optics.source_centre  # the condenser disk, off axis where the aberrations say so
+            src.append(soft_disk(np.hypot(ux - cx, uy - cy), optics.source_radius, math.sqrt(du[0] * du[1])))
             pup.append(p)
             eta.append(axial_frequency(ux, uy, optics))
         self.src, self.pup, self.eta = np.stack(src), np.stack(pup), np.stack(eta)
@@ -275,8 +276,10 @@ def paper_transfer_functions(optics: Optics, shape, pixel_um, z_um=0.0):
     fy = (_fft_indices(m_in[0]) * du[0])[:, None]
     fx = (_fft_indices(m_in[1]) * du[1])[None, :]
     step = math.sqrt(du[0] * du[1])
-    disk = soft_disk(np.hypot(fx, fy), optics.source_radius, step)
-    pupil = Pupil.of(optics).objective(fx, fy, step).astype(complex)
+    cx, cy = optics.source_centre
+    disk = soft_disk(np.hypot(fx - cx, fy - cy), optics.source_radius, step)
+    full = Pupil.of(optics)
+    pupil = full.objective(fx, fy, step) * np.exp(1j * full.phase(fx, fy))  # the objective's aberration
     eta = axial_frequency(fx, fy, optics)
     norm = _disk_power(optics.source_radius, du)
     # "up" sees u_y > 0 (docs/conventions.md); the half-plane edge gets half weight

@@ -196,10 +196,11 @@ class ViewsMultislice:
         # multislice runs once per point; its exit field stands for q x q sub-points of its cell,
         # which the exit propagation, the pupil and the sub-apertures see at their own tilt
         h, q = source_spacing_na / lam, int(source_subsamples)
-        u_k = np.array([ln.u for ln in lenslets] if not isinstance(lenslets, np.ndarray) else lenslets, float)
         self.pupil = Pupil.of(optics)
-        self.rho = self.pupil.rho
-        w, w_sub, wgt = source_quadrature(optics, self.pupil, u_k, h, q, edge_weights)
+        # each lenslet's own sub-aperture: centre u_k, radius ρ_k, defocus d_k (docs/aberrations.md)
+        u_k, rho_k, defocus_k = self.pupil.lenslet_arrays(lenslets)
+        self.rho = float(rho_k.max())
+        w, w_sub, wgt = source_quadrature(optics, self.pupil, lenslets, h, q, edge_weights)
         self.n_sources, self.n_subsources = len(w), q * q
         self.m = m = min(even_fast(int(math.ceil((4 * self.rho + h) / du)) + 4), nv)
         self.chunk = max(1, int(chunk))
@@ -222,6 +223,8 @@ class ViewsMultislice:
         self._ux, self._uy = xp_.asarray(ux.astype(np.float32)), xp_.asarray(uy.astype(np.float32))
         self._inx, self._iny = xp_.asarray(inx), xp_.asarray(iny)
         self._uk = tuple(xp_.asarray(u_k[:, i].astype(np.float32))[:, None, None] for i in range(2))
+        self._rho_k = xp_.asarray(rho_k.astype(np.float32))[:, None, None]
+        self._defocus_k = xp_.asarray(defocus_k.astype(np.float32))[:, None, None] if np.any(defocus_k) else None
         self._eta0 = xp_.asarray(eta0.astype(np.float32))[..., None, None, None]
         self._kernels: list | None = None
         i0 = self._interpolate(self._intensity(None)[0])  # sample-free views: constant per lenslet
@@ -264,10 +267,14 @@ class ViewsMultislice:
         xp = self.xp
         ux, uy = self._ux[sl][..., None, :], self._uy[sl][..., :, None]
         inside = (
-            self.pupil.subaperture(ux, uy, self._uk, xp=xp) & self._iny[sl][..., :, None] & self._inx[sl][..., None, :]
+            self.pupil.subaperture(ux, uy, self._uk, xp=xp, rho=self._rho_k)
+            & self._iny[sl][..., :, None]
+            & self._inx[sl][..., None, :]
         )
         u2 = ux * ux + uy * uy
         phase = (2 * math.pi * self.z_exit) * (xp.sqrt(xp.maximum(self._k2 - u2, 0)) - self._eta0[sl])
+        if self.pupil.aberrated:  # the objective's and each lenslet's phase
+            phase = phase + self.pupil.phase(ux, uy, self._uk, self._rho_k, self._defocus_k, xp)
         return (inside * xp.exp(1j * phase)).astype(self.cdtype)
 
     def _gather(self, sl):

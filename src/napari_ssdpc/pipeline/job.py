@@ -11,6 +11,7 @@ import numpy as np
 
 from napari_ssdpc._version import SOFTWARE
 from napari_ssdpc.calibration.result import Calibration
+from napari_ssdpc.reconstruction.checks import optics_in_use
 from napari_ssdpc.settings.config import RunConfig
 
 __all__ = ["Job"]
@@ -71,7 +72,7 @@ class Job:
             ``software``, ``source`` (when given), ``optics``, ``medium_index`` and ``calibration``
             (without the per-lenslet table); the sinks add each result's settings.
         """
-        optics = self.config.optics
+        optics = optics_in_use(self.config.optics, self.calibration)  # with the calibration's aberrations
         meta = {
             "software": SOFTWARE,
             "optics": optics.to_dict(),

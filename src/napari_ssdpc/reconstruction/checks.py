@@ -5,7 +5,7 @@ napari, the series runner and the Python API alike:
 
 - :func:`check_optics_match`: the optics in use against the calibration's (every field that
   changes the numbers: :data:`OPTICS_FIELDS`) and against the lattice pitch measured on the
-  white frame.
+  white frame; :func:`optics_in_use` adds the calibration's aberrations to optics that have none.
 - :func:`~napari_ssdpc.reconstruction.memory.check_memory` (its own module): an estimate of the
   operators and outputs against the free memory.
 - :func:`check_flat` and :func:`check_frame_light`: a flat or raw frame without light, all
@@ -30,6 +30,7 @@ __all__ = [
     "check_flat",
     "check_frame_light",
     "check_optics_match",
+    "optics_in_use",
     "check_result",
     "check_saturated",
     "dark_pixel_index",
@@ -100,6 +101,40 @@ def check_optics_match(optics, cal, source: str = "--optics") -> None:
             f"{100 * abs(measured / expected - 1):.0f}%: the calibration or its optics were edited or belong to "
             "another instrument; recalibrate on a white frame"
         )
+
+
+def optics_in_use(optics, cal, source: str = "--optics"):
+    """The optics a reconstruction uses: the given ones, checked against the calibration's
+    (:func:`check_optics_match`), with the calibration's aberrations where the given optics have none
+    (a calibration with fitted optics carries the instrument's aberrations, docs/aberrations.md).
+
+    Parameters
+    ----------
+    optics : Optics
+        The optics given (file, widget or run configuration).
+    cal : Calibration
+    source : str
+        Where the optics come from, for the message.
+
+    Returns
+    -------
+    Optics
+
+    Raises
+    ------
+    SsdpcError
+        As :func:`check_optics_match`, or both give aberrations and they differ.
+    """
+    check_optics_match(optics, cal, source)
+    mine, theirs = optics.aberrations, cal.optics.aberrations
+    if theirs.is_nominal or mine == theirs:
+        return optics
+    if mine.is_nominal:
+        return optics.replace(aberrations=theirs)
+    raise SsdpcError(
+        f"the optics ({source}) and the calibration give different aberrations ({mine.summary()} vs "
+        f"{theirs.summary()} in the calibration); remove the optics' aberrations section to use the calibration's"
+    )
 
 
 def _key(attr: str) -> str:

@@ -22,6 +22,7 @@ import scipy.fft as sfft
 
 from napari_ssdpc.backend import cpu
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
+from napari_ssdpc.physics.pupil import Pupil
 from napari_ssdpc.settings.lenslets import circle_overlap_fraction
 
 __all__ = [
@@ -90,10 +91,11 @@ def apparent_condenser_na(levels, lenslets, optics) -> ApparentNA:
         optics' NA explains the levels clearly worse than the best one.
     """
     inner = np.array([ln.fraction >= 0.999 for ln in lenslets])
-    d = np.hypot(*np.array([ln.u for ln in lenslets], float)[inner].T)
+    u_k, rho_k, _ = Pupil.of(optics).lenslet_arrays(lenslets)  # each lenslet's own sub-aperture
+    d, rho = np.hypot(*(u_k[inner] - optics.source_centre).T), rho_k[inner]  # from the condenser's centre
     lv = np.clip(np.asarray(levels, float)[inner], 0, None)
     lv = lv / max(lv.max(), 1e-30)
-    nas, overlaps = _overlaps(tuple(d), float(optics.subaperture_radius), float(optics.wavelength_um), float(optics.na))
+    nas, overlaps = _overlaps(tuple(d), tuple(rho), float(optics.wavelength_um), float(optics.na))
 
     def misfit(m):  # Σ (lv − s m)² at the best scale s, for each row of m
         return lv @ lv - (m @ lv) ** 2 / np.maximum(np.einsum("ij,ij->i", m, m), 1e-30)
@@ -104,17 +106,17 @@ def apparent_condenser_na(levels, lenslets, optics) -> ApparentNA:
     err = misfit(overlaps[fine])
     best = int(np.argmin(err))
     floor = max(float(err[best]), MISFIT_FLOOR)
-    m_optics = circle_overlap_fraction(d, optics.subaperture_radius, optics.condenser_na / optics.wavelength_um)
+    m_optics = circle_overlap_fraction(d, rho, optics.condenser_na / optics.wavelength_um)
     excess = (float(misfit(m_optics[None])[0]) - float(err[best])) / floor
     return ApparentNA(round(float(nas[fine[best]]), 4), excess, floor)
 
 
 @functools.lru_cache(maxsize=16)
-def _overlaps(d: tuple, radius: float, wavelength_um: float, na_max: float) -> tuple[np.ndarray, np.ndarray]:
+def _overlaps(d: tuple, radius: tuple, wavelength_um: float, na_max: float) -> tuple[np.ndarray, np.ndarray]:
     """Condenser NAs 0.01..na_max every 0.0005, and each lenslet's lit fraction at each: (N,), (N, K).
     The same for every frame of a calibration: computed once."""
     nas = 0.01 + 0.0005 * np.arange(int(np.floor((na_max - 0.01) / 0.0005 + 1e-6)) + 1)
-    return nas, np.array([circle_overlap_fraction(np.asarray(d), radius, na / wavelength_um) for na in nas])
+    return nas, np.array([circle_overlap_fraction(np.asarray(d), np.asarray(radius), na / wavelength_um) for na in nas])
 
 
 def check_lit_lenslets(lenslets, optics, name: str = "flat frame") -> None:
@@ -132,8 +134,8 @@ def check_lit_lenslets(lenslets, optics, name: str = "flat frame") -> None:
     name : str
         For the message.
     """
-    d = np.hypot(*np.array([ln.u for ln in lenslets], float).reshape(-1, 2).T)
-    model = circle_overlap_fraction(d, optics.subaperture_radius, optics.condenser_na / optics.wavelength_um)
+    u_k, rho_k, _ = Pupil.of(optics).lenslet_arrays(lenslets)  # each lenslet's own sub-aperture
+    model = circle_overlap_fraction(np.hypot(*(u_k - optics.source_centre).T), rho_k, optics.source_radius)
     dark = [ln for ln, m in zip(lenslets, model) if m <= 0]
     if dark:
         ln = dark[0]

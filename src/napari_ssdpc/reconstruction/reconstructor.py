@@ -185,11 +185,10 @@ class Reconstructor:
         _check_arguments(min_light=min_light, progress=progress, method=method)
         t0 = time.perf_counter()
         self.config, self.calibration = config, calibration
-        self.optics = optics = config.optics
+        self.optics = optics = checks.optics_in_use(config.optics, calibration, "optics")
         settings = config.reconstruction
         method = method_class(settings.method) if method is None else method
         with_stacks = bool(stacks) or config.outputs.needs_stacks or method.uses_stacks
-        checks.check_optics_match(optics, calibration, "optics")
         if check_memory:
             memory.check_memory(optics, calibration, settings, with_stacks)
         self.dz = float(settings.dz_um)
@@ -230,7 +229,7 @@ class Reconstructor:
         """
         new, old = config.reconstruction.operator_key(), self.config.reconstruction.operator_key()
         method = self._method_for(config.reconstruction.method)
-        same = config.optics == self.optics and {**new, "method": ""} == {**old, "method": ""}
+        same = config.optics in (self.config.optics, self.optics) and {**new, "method": ""} == {**old, "method": ""}
         if not same or method is None or (config.outputs.needs_stacks and self.stacks is None):
             return False
         self.config = config

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import typing
 from typing import Any, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -105,13 +106,17 @@ class SettingsModel(BaseModel):
 
 
 def _model_at(model: type[BaseModel], loc: tuple) -> type[BaseModel] | None:
-    """The sub-model that holds the key at ``loc`` (for the nearest-key hint)."""
+    """The sub-model that holds the key at ``loc`` (for the nearest-key hint); an index into a
+    sequence of sub-models stays with that sub-model."""
     for part in loc[:-1]:
-        field = model.model_fields.get(str(part)) if isinstance(part, str) else None
+        if isinstance(part, int):
+            continue
+        field = model.model_fields.get(str(part))
         ann = getattr(field, "annotation", None)
-        if not (isinstance(ann, type) and issubclass(ann, BaseModel)):
+        inner = [a for a in (ann, *typing.get_args(ann)) if isinstance(a, type) and issubclass(a, BaseModel)]
+        if not inner:
             return None
-        model = ann
+        model = inner[0]
     return model
 
 

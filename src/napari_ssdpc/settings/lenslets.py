@@ -89,21 +89,22 @@ def circle_overlap_fraction(d, r_small, r_big):
     ----------
     d : array_like
         Distance between the centres (any length unit, the same for all three).
-    r_small, r_big : float
-        The two radii.
+    r_small, r_big : float or array_like
+        The two radii (broadcastable with ``d``: each lenslet its own radius).
 
     Returns
     -------
-    ndarray, float64, shape of ``d``
+    ndarray, float64, the broadcast shape
         Area fraction of the small circle inside the big one (exact lens-area formula).
     """
-    d = np.abs(np.asarray(d, dtype=float))
-    r, R = float(r_small), float(r_big)
-    out = np.zeros_like(d)
-    inside = d <= abs(R - r)
-    out[inside] = 1.0 if r <= R else (R / r) ** 2
+    d, r, R = np.broadcast_arrays(
+        np.abs(np.asarray(d, dtype=float)), np.asarray(r_small, float), np.asarray(r_big, float)
+    )
+    out = np.zeros(d.shape)
+    inside = d <= np.abs(R - r)
+    out[inside] = np.where(r <= R, 1.0, (R / r) ** 2)[inside]
     part = (~inside) & (d < R + r)
-    dp = d[part]
+    dp, r, R = d[part], r[part], R[part]
     a1 = r * r * np.arccos(np.clip((dp * dp + r * r - R * R) / (2 * dp * r), -1, 1))
     a2 = R * R * np.arccos(np.clip((dp * dp + R * R - r * r) / (2 * dp * R), -1, 1))
     a3 = 0.5 * np.sqrt(np.clip((-dp + r + R) * (dp + r - R) * (dp - r + R) * (dp + r + R), 0, None))

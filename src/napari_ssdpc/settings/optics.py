@@ -21,6 +21,7 @@ import yaml
 from pydantic import Field, model_validator
 
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
+from napari_ssdpc.settings.aberrations import Aberrations
 from napari_ssdpc.settings.base import SettingsModel, bounded
 from napari_ssdpc.settings.files import read_mapping
 from napari_ssdpc.settings.parts import MLA, PART_KEYS, Objective, Sensor
@@ -49,6 +50,9 @@ class Optics(SettingsModel):
     )
     flip_x: bool = Field(False, description="the camera mirrors x (columns)")
     flip_y: bool = Field(False, description="the camera mirrors y (rows)")
+    aberrations: Aberrations = Field(
+        default_factory=Aberrations, description="what the instrument adds to the nominal optics (all zero: none)"
+    )
 
     @model_validator(mode="after")
     def _physical(self) -> Optics:
@@ -111,10 +115,12 @@ class Optics(SettingsModel):
         return cls.from_dict(PAPER_OPTICS, source="paper optics")
 
     def to_dict(self) -> dict:
-        """The YAML schema as a plain mapping (``iris_radius_um`` only when set)."""
+        """The YAML schema as a plain mapping (``iris_radius_um`` and ``aberrations`` only when set)."""
         d = super().to_dict()
         if d["iris_radius_um"] is None:
             del d["iris_radius_um"]
+        if self.aberrations.is_nominal:
+            del d["aberrations"]
         return d
 
     def to_yaml(self, path: str | Path) -> Path:
@@ -291,6 +297,12 @@ class Optics(SettingsModel):
     def subaperture_radius(self) -> float:
         """Sub-aperture radius in cycles/µm, r_ml / (λ f_obj m_r)."""
         return self.subaperture_na / self.wavelength_um
+
+    @property
+    def source_centre(self) -> tuple[float, float]:
+        """The condenser disk's centre (x, y), cycles/µm: (0, 0) unless the aberrations put it off axis."""
+        cx, cy = self.aberrations.condenser_offset_na
+        return cx / self.wavelength_um, cy / self.wavelength_um
 
     @property
     def source_radius(self) -> float:

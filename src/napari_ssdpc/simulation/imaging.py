@@ -43,7 +43,7 @@ def crop_size(optics, sampling):
     int
         Even crop width, lattice units, at most ``sampling.n``.
     """
-    nc = even_fast(int(math.ceil(4 * optics.subaperture_radius / sampling.du)) + 4)
+    nc = even_fast(int(math.ceil(4 * Pupil.of(optics).rho_max / sampling.du)) + 4)  # the widest sub-aperture
     return min(nc, sampling.n)
 
 
@@ -72,7 +72,7 @@ class Imager:
         self.nc = crop_size(optics, sampling)
         # A_k = P_obj · P_k on each lenslet's crop (|amplitude|² = area fraction of the cell)
         pupil = Pupil.of(optics)
-        self.centres, self.apert = subaperture_windows([ln.u for ln in lenslets], pupil, sampling.du, self.nc)
+        self.centres, self.apert = subaperture_windows(lenslets, pupil, sampling.du, self.nc)
         self.off = np.arange(self.nc) - self.nc // 2
         self.acc = np.zeros((len(lenslets), self.nc, self.nc), dtype=np.float64)
         n = sampling.n
@@ -84,6 +84,9 @@ class Imager:
         # objective pupil before the iris, absolute lattice in FFT order: every cell that touches the
         # pupil passes; the exact (anti-aliased) pupil edge is applied with A_k after the iris
         self.pupil = pupil.objective_cells(u2, sampling.du)
+        if pupil.zernike:  # the objective's aberration, at the pupil (before the iris)
+            ux, uy = np.broadcast_arrays(u[None, :], u[:, None])
+            self.pupil = self.pupil * np.exp(1j * pupil.phase(ux, uy)).astype(np.complex64)
         self.eta = eta(u2, optics.medium_index, optics.wavelength_um)
         self.scale = (self.nc / n) ** 4 / (math.pi * optics.subaperture_radius**2)
 

@@ -187,7 +187,9 @@ class Source:
             ``(idx, w, weights)``: lattice indices (K, 2), frequencies (K, 2) in cycles/µm and
             weights (K,) in (cycles/µm)², as :func:`napari_ssdpc.physics.apertures.kohler_source` gives them.
         """
-        return kohler_source(self.radius(optics), sampling.du, int(self.step), int(self.supersample))
+        return kohler_source(
+            self.radius(optics), sampling.du, int(self.step), int(self.supersample), centre=optics.source_centre
+        )
 
 
 # ------------------------------------------------------------------------ multislice

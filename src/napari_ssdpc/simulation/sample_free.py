@@ -55,26 +55,31 @@ def white_intensity(
     with np.errstate(invalid="ignore", divide="ignore"):
         disk = np.where(fr > 0, R * special.j1(2 * np.pi * R * fr) / fr, np.pi * R * R) / L**2
     coeffs = []
+    pupil = Pupil.of(optics)
     for ln in lenslets:
         if ln.fraction <= 0:  # moved out of the pupil (imperfect.ArrayErrors): dark
             coeffs.append(np.zeros_like(disk))
             continue
-        c = disk * _incoherent_otf(ln.u, optics, sampling.du, nc)
-        coeffs.append(c * (ln.fraction / c.sum().real))  # value at the EI centre = exact fraction
+        c = disk * _incoherent_otf(ln, optics, sampling.du, nc)
+        # value at the EI centre = the exact fraction (the lenslet's own sub-aperture where it differs)
+        fraction = pupil.area_fraction(ln) if pupil.lenslet_terms else ln.fraction
+        coeffs.append(c * (fraction / c.sum().real))
     coeffs = np.array(coeffs)
     return render(coeffs.astype(np.complex128), centres, optics, sampling, grid, camera)
 
 
-def _incoherent_otf(u_k, optics, du, nc, q=4):
-    """Normalised autocorrelation of A_k = P_obj · P_k at lags that are multiples of du."""
-    rho = optics.subaperture_radius
+def _incoherent_otf(lenslet, optics, du, nc, q=4):
+    """Normalised autocorrelation of the lenslet's pupil P_k (:meth:`Pupil.field`, with the optics'
+    aberrations) at lags that are multiples of du."""
+    pupil = Pupil.of(optics)
+    u_k, rho, _ = pupil.lenslet(lenslet)
     d = du / q
     m = int(math.ceil((rho + 2 * du) / d))
     t = np.arange(-m, m + 1) * d
     sx, sy = u_k[0] + t[None, :], u_k[1] + t[:, None]
-    a = Pupil.of(optics).subaperture(sx, sy, u_k).astype(float)
+    a = pupil.field(sx, sy, lenslet) * 1.0  # bool -> float for the nominal optics
     N = sfft.next_fast_len(2 * len(t) + 1)
-    ac = cpu().ifft2(np.abs(cpu().fft2(a, s=(N, N))) ** 2).real
+    ac = cpu().ifft2(np.abs(cpu().fft2(a, s=(N, N))) ** 2)  # complex for an aberrated pupil
     lag = (np.fft.fftfreq(nc, 1.0 / nc).astype(int) * q) % N
     otf = ac[np.ix_(lag, lag)]
     return otf / ac[0, 0]

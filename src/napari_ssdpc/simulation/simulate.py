@@ -182,8 +182,9 @@ def effective_tan_theta(optics: Optics, lenslet, supersample: int = 400) -> np.n
     ndarray, (2,)
         tanθ·û (x, y), dimensionless: µm of lateral shift per µm of depth.
     """
-    rho = optics.subaperture_radius
+    pupil = Pupil.of(optics)
+    u_k, rho, _ = pupil.lenslet(lenslet)  # its own sub-aperture
     t = np.linspace(-rho, rho, supersample)
-    ux, uy = np.meshgrid(lenslet.u[0] + t, lenslet.u[1] + t)
-    a = Pupil.of(optics).subaperture(ux, uy, lenslet.u)
+    ux, uy = np.meshgrid(u_k[0] + t, u_k[1] + t)
+    a = pupil.subaperture(ux, uy, u_k, rho=rho)
     return mean_tilt(optics, a[a].astype(float), ux[a], uy[a])  # tanθ·û = u/η(u), averaged over A_k

@@ -160,7 +160,8 @@ class CalibrateWidget(StepWidget):
         self.result.value = (
             f"axis (x, y) = ({g.axis_px[0]:.2f}, {g.axis_px[1]:.2f}) px\n"
             f"pitch {g.pitch_px:.3f} px · rotation {g.rotation_deg:+.3f}°\n"
-            f"{len(cal.lenslets)} lenslets · lattice rms {cal.residual_px:.3f} px · {cal.kind} frame"
+            f"{len(cal.lenslets)} lenslets · lattice rms {cal.residual_px:.3f} px · {cal.kind} frame\n"
+            f"{cal.optics.aberrations.summary()}"
         )
         return f"calibrated on '{source}'"
 
