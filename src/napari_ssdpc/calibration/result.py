@@ -71,6 +71,9 @@ class Calibration:
         (NaN where the axis was given or assumed: ``kind_evidence["axis"]``).
     kind : str
         "white", "flat" or "sample"; ``kind_evidence`` says why and how sure.
+    optics_fit : dict
+        What `ssdpc fit-optics` fitted into ``optics`` from the user's frames (each part's terms,
+        uncertainties and misfit; empty for a calibration of the nominal optics).
     deviation_px : ndarray (K, 2)
         Measured centre minus lattice position, px (NaN where not measured).
     measured : ndarray (K,) bool
@@ -96,6 +99,7 @@ class Calibration:
     shear_deg: float = 0.0
     aspect: float = 0.0
     kind_evidence: dict = field(default_factory=dict)
+    optics_fit: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         k = len(self.lenslets)
@@ -206,6 +210,8 @@ class Calibration:
             "lenslets": self.table,
             "optics": self.optics.to_dict(),
         }
+        if self.optics_fit:  # a calibration of the nominal optics keeps its old form and checksum
+            d["optics_fit"] = self.optics_fit
         return {**d, "checksum": content_checksum(d)}
 
     @classmethod
@@ -266,6 +272,7 @@ class Calibration:
                 shear_deg=float(d.get("shear_deg", 0.0)),
                 aspect=float(d.get("aspect", 0.0)),
                 kind_evidence=dict(d.get("kind_evidence", {})),
+                optics_fit=dict(d.get("optics_fit", {})),
             )
         except SsdpcError:
             raise

@@ -25,6 +25,7 @@ from napari_ssdpc.cli.commands import (
     cmd_resign,
     cmd_simulate,
 )
+from napari_ssdpc.cli.fit_optics import add_fit_optics_command
 from napari_ssdpc.cli.measure import add_measure_command
 from napari_ssdpc.cli.options import add_reconstruction_options
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
@@ -89,6 +90,8 @@ def build_parser():
     )
     s.add_argument("--overwrite", action="store_true", help=overwrite_help)
     s.set_defaults(func=cmd_calibrate)
+
+    add_fit_optics_command(sub)
 
     s = sub.add_parser("resign-calibration", help="accept a deliberately edited calibration JSON (new checksum)")
     s.add_argument("calibration", help="calibration JSON written by `ssdpc calibrate`, edited by hand")

@@ -1,5 +1,6 @@
 from .bead import Bead
 from .beads import fit_beads, measure_beads
+from .condenser_fit import CondenserFit, fit_condenser
 from .methods import METHODS, method_class
 from .methods.base import PhaseMethod, Setup, Solution
 from .reconstructor import Reconstructor, Result
@@ -10,6 +11,7 @@ from .wotf import WotfInversion
 __all__ = [
     "METHODS",
     "Bead",
+    "CondenserFit",
     "PhaseMethod",
     "Reconstructor",
     "Result",
@@ -19,6 +21,7 @@ __all__ = [
     "TvReport",
     "WotfInversion",
     "fit_beads",
+    "fit_condenser",
     "measure_beads",
     "method_class",
 ]

@@ -106,7 +106,9 @@ def check_optics_match(optics, cal, source: str = "--optics") -> None:
 def optics_in_use(optics, cal, source: str = "--optics"):
     """The optics a reconstruction uses: the given ones, checked against the calibration's
     (:func:`check_optics_match`), with the calibration's aberrations where the given optics have none
-    (a calibration with fitted optics carries the instrument's aberrations, docs/aberrations.md).
+    and its condenser NA where `ssdpc fit-optics` measured it and the given optics still name the NA
+    it corrected (a calibration with fitted optics carries the instrument as it is,
+    docs/aberrations.md; optics that name another NA are a new condenser setting and are kept).
 
     Parameters
     ----------
@@ -126,6 +128,9 @@ def optics_in_use(optics, cal, source: str = "--optics"):
         As :func:`check_optics_match`, or both give aberrations and they differ.
     """
     check_optics_match(optics, cal, source)
+    fitted = cal.optics_fit.get("condenser", {})
+    if fitted and optics.condenser_na == fitted.get("na_given"):  # the NA the fit corrected, not a new setting
+        optics = optics.replace(condenser_na=cal.optics.condenser_na)  # measured on the user's flat frame
     mine, theirs = optics.aberrations, cal.optics.aberrations
     if theirs.is_nominal or mine == theirs:
         return optics

@@ -213,7 +213,8 @@ def warn_condenser_na(seen: ApparentNA, optics, name: str, flat: bool = True) ->
         warnings.warn(
             f"{name}: its lenslets are lit as by a condenser NA of {na_seen:.3f}, the optics say {na:g}: Δn depends "
             f"on it through the transfer functions (5 % off moved a bead's peak Δn by 21 %); set condenser_na to "
-            f"{na_seen:.3f} if the condenser was there",
+            f"{na_seen:.3f} if the condenser was there, or measure its NA and centre on the flat with `ssdpc "
+            "fit-optics --calibration CAL --flat FLAT -o FITTED.json`",
             SsdpcWarning,
             stacklevel=4,
         )

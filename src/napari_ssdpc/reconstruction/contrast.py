@@ -221,6 +221,26 @@ class ViewContrast:
         dark = float(np.median(dark_px)) if self.dark is None else self.dark
         return img, dark, _noise(dark_px if dark_px.size else img.ravel())
 
+    def lenslet_levels(self, frame, name: str = "flat frame"):
+        """Every lenslet's light on a frame, without the checks of its condenser NA (for fitting it).
+
+        Parameters
+        ----------
+        frame : ndarray, (H, W)
+            Raw frame, camera units.
+        name : str
+            For the messages.
+
+        Returns
+        -------
+        levels : ndarray, (K,)
+            Every calibrated lenslet's median light above the dark level, camera units.
+        noise : float
+            Noise of the dark pixels, camera units.
+        """
+        levels, noise, _ = self._measure(frame, name)
+        return levels, noise
+
     def _measure(self, frame, name: str):
         """Check the flat frame and extract all its views (every pixel of every lenslet counts).
 
