@@ -46,6 +46,11 @@ def test_the_condenser_is_fitted_and_used(files, real_flat, tmp_path, capsys):
     assert used.condenser_na == fitted.optics.condenser_na and used.source_centre == fitted.optics.source_centre
     # optics that name another condenser NA are a new setting: kept
     assert optics_in_use(nominal.replace(condenser_na=0.2), fitted).condenser_na == 0.2
+    # with the white frame: each view's focus, in focus here (no notice)
+    argv = ("fit-optics", "--calibration", files / "cal.json", "--flat", flat, "--white", files / "white.tif")
+    assert main([str(a) for a in (*argv, "-o", tmp_path / "focus.json")]) == 0
+    text = capsys.readouterr().out
+    assert "view defocus |d| 0.0" in text and "blurred" not in text
 
 
 @pytest.mark.parametrize(

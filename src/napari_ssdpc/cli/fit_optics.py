@@ -1,7 +1,8 @@
 """``ssdpc fit-optics``: what the user's frames say the instrument is, written into a new calibration.
 
-Today it fits the condenser (its NA and its centre off the optical axis) to the lenslets' light on
-a flat frame (docs/aberrations.md); every reconstruction made with the new calibration uses them.
+It fits the condenser (its NA and its centre off the optical axis) to the lenslets' light on a flat
+frame, and every reconstruction made with the new calibration uses them; given the white frame, it
+measures each view's focus on its EI rims and says when they are blurred (docs/aberrations.md).
 """
 
 from __future__ import annotations
@@ -29,6 +30,10 @@ def add_fit_optics_command(sub) -> None:
     )
     s.add_argument("--calibration", required=True, help="calibration JSON from `ssdpc calibrate`")
     s.add_argument("--flat", required=True, help="flat frame (no sample, the raw frames' condenser NA)")
+    s.add_argument(
+        "--white",
+        help="the white frame the calibration was made on: each view's focus is measured on its EI rims",
+    )
     s.add_argument("--optics", help="optics YAML; default: the optics stored in the calibration")
     s.add_argument("-o", "--output", required=True, help="calibration JSON to write, with the fitted optics")
     s.add_argument("--overwrite", action="store_true", help="replace the output whatever it holds")
@@ -54,7 +59,12 @@ def cmd_fit_optics(args) -> None:
     out = Path(args.output)
     check_outputs(
         {"calibration": out},
-        {"calibration": args.calibration, "flat frame": args.flat, "optics file": args.optics},
+        {
+            "calibration": args.calibration,
+            "flat frame": args.flat,
+            "white frame": args.white,
+            "optics file": args.optics,
+        },
         overwrite=args.overwrite,
         replaceable=is_ours,
     )
@@ -68,8 +78,18 @@ def cmd_fit_optics(args) -> None:
     fitted = dataclasses.replace(
         cal, optics=fit.optics(optics), optics_fit={**cal.optics_fit, "condenser": fit.to_dict(optics)}
     )
+    focus = None
+    if args.white is not None:
+        from napari_ssdpc.calibration.view_focus import fit_view_focus
+        from napari_ssdpc.progress import tqdm_callback
+
+        white = read_frame(args.white, allow_series=False, name="white frame")
+        with tqdm_callback("measuring the views' focus", unit="defocus") as cb:
+            focus = fit_view_focus(white, cal, fitted.optics, progress=cb)
     fitted.to_json(out)
-    for line in fit.report():
+    for line in fit.report() + ([] if focus is None else focus.report()):
         print(line)
+    if focus is not None and focus.blurred:
+        print(focus.notice())
     print(fitted.optics.aberrations.summary())
     print(f"wrote {out}")
