@@ -48,3 +48,16 @@ def test_the_core_s_flag_messages_are_all_translated():
                     flags.update(re.findall(r"--[a-z][a-z-]*(?: [a-z0-9]+)?", line))
     left = {f for f in flags if "--" in gui_words(f"({f})") and "--" in gui_words(f"reconstruct with {f}")}
     assert not left, f"core messages name flags the dock does not translate: {sorted(left)}"
+
+
+def test_the_condenser_warning_names_the_fit_in_the_dock():
+    import warnings
+
+    from napari_ssdpc.reconstruction.consistency import warn_condenser_na
+    from napari_ssdpc.settings.optics import Optics
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        warn_condenser_na((0.262, 5.0, 1e-3), Optics.paper().replace(condenser_na=0.25), "flat frame", True)
+    text = gui_words(str(caught[0].message))
+    assert "with Fit the optics (Calibrate tab)" in text and "--" not in text

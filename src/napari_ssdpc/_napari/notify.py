@@ -14,6 +14,9 @@ __all__ = ["error", "gui_words", "info", "warning"]
 
 #: (pattern, words) for the flags the core's messages name, in the order they are applied.
 _GUI_WORDS = (
+    (r"with `ssdpc fit-optics --calibration CAL --flat FLAT -o FITTED\.json`", "with Fit the optics (Calibrate tab)"),
+    (r"--calibration\b", "the calibration (Method tab)"),
+    (r"--flat\b", "the flat frame (Reconstruct tab)"),
     (r"reconstruct with --method (\w+)", r"choose the phase method '\1' (Method tab)"),
     (r"--method (\w+)", r"the phase method '\1' (Method tab)"),
     (r"\(--tv-warm-iterations\)", "(in the run configuration)"),

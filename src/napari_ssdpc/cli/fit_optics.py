@@ -7,7 +7,6 @@ measures each view's focus on its EI rims and says when they are blurred (docs/a
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 __all__ = ["add_fit_optics_command", "cmd_fit_optics"]
@@ -52,9 +51,8 @@ def cmd_fit_optics(args) -> None:
     from napari_ssdpc.cli.options import optics_file
     from napari_ssdpc.io.frames import read_frame
     from napari_ssdpc.io.paths import check_outputs, is_ours
-    from napari_ssdpc.reconstruction.checks import check_optics_match
-    from napari_ssdpc.reconstruction.condenser_fit import fit_condenser
-    from napari_ssdpc.reconstruction.contrast import ViewContrast
+    from napari_ssdpc.progress import tqdm_callback
+    from napari_ssdpc.reconstruction.optics_fit import fit_optics
 
     out = Path(args.output)
     check_outputs(
@@ -69,27 +67,15 @@ def cmd_fit_optics(args) -> None:
         replaceable=is_ours,
     )
     cal = Calibration.from_json(args.calibration)
-    optics = cal.optics if args.optics is None else optics_file(args.optics)
-    check_optics_match(optics, cal, "--optics")
+    optics = None if args.optics is None else optics_file(args.optics)
     flat = read_frame(args.flat, allow_series=False, name="flat frame")
-    cal.check_frame(flat, "flat frame")
-    levels, _ = ViewContrast(optics, cal).lenslet_levels(flat, "flat frame")
-    fit = fit_condenser(levels, cal.lenslets, optics)
-    fitted = dataclasses.replace(
-        cal, optics=fit.optics(optics), optics_fit={**cal.optics_fit, "condenser": fit.to_dict(optics)}
-    )
-    focus = None
-    if args.white is not None:
-        from napari_ssdpc.calibration.view_focus import fit_view_focus
-        from napari_ssdpc.progress import tqdm_callback
-
-        white = read_frame(args.white, allow_series=False, name="white frame")
+    white = None if args.white is None else read_frame(args.white, allow_series=False, name="white frame")
+    if white is None:
+        fit = fit_optics(cal, flat, optics)
+    else:
         with tqdm_callback("measuring the views' focus", unit="defocus") as cb:
-            focus = fit_view_focus(white, cal, fitted.optics, progress=cb)
-    fitted.to_json(out)
-    for line in fit.report() + ([] if focus is None else focus.report()):
+            fit = fit_optics(cal, flat, optics, white, progress=cb)
+    fit.calibration.to_json(out)
+    for line in fit.report():
         print(line)
-    if focus is not None and focus.blurred:
-        print(focus.notice())
-    print(fitted.optics.aberrations.summary())
     print(f"wrote {out}")

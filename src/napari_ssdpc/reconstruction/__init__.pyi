@@ -3,6 +3,7 @@ from .beads import fit_beads, measure_beads
 from .condenser_fit import CondenserFit, fit_condenser
 from .methods import METHODS, method_class
 from .methods.base import PhaseMethod, Setup, Solution
+from .optics_fit import OpticsFit, fit_optics
 from .reconstructor import Reconstructor, Result
 from .regularised import TvInversion
 from .tv_report import TvReport
@@ -10,6 +11,7 @@ from .wotf import WotfInversion
 
 __all__ = [
     "METHODS",
+    "OpticsFit",
     "Bead",
     "CondenserFit",
     "PhaseMethod",
@@ -22,6 +24,7 @@ __all__ = [
     "WotfInversion",
     "fit_beads",
     "fit_condenser",
+    "fit_optics",
     "measure_beads",
     "method_class",
 ]

@@ -17,6 +17,7 @@ from napari_ssdpc._napari.widgets.common import (
     wrap,
 )
 from napari_ssdpc._napari.widgets.jobs import JobRunner
+from napari_ssdpc._napari.widgets.optics_fit import OpticsFitWidget
 from napari_ssdpc.errors import SsdpcError
 
 __all__ = ["CalibrateWidget", "guide_points"]
@@ -98,6 +99,9 @@ class CalibrateWidget(StepWidget):
             ]
         )
         self.runner = JobRunner("Calibrate", self.run_button, self.cancel_button, self.status)
+        self.fit = OpticsFitWidget(napari_viewer, scrollable=False)  # the next step on these frames
+        self.fit.label = "Fit the optics"
+        self.append(self.fit)
         self.calibration = None
         self.run_button.changed.connect(self.run)
         self.guide_button.changed.connect(lambda *_: self.add_guide_points())

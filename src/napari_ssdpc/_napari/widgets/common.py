@@ -257,10 +257,12 @@ class StepWidget(Container):
     role : str, optional
         The session's slot for this kind of step ('operators_widget', 'reconstruct_widget'):
         when the dock and a separate widget of the same kind are open, the one edited last counts.
+    scrollable : bool
+        False for a step shown inside another (that one scrolls).
     """
 
-    def __init__(self, napari_viewer, role: str | None = None):
-        super().__init__(labels=True, scrollable=True)
+    def __init__(self, napari_viewer, role: str | None = None, scrollable: bool = True):
+        super().__init__(labels=True, scrollable=scrollable)
         compact(self)
         self.viewer = napari_viewer
         self.session = session_for(napari_viewer)
