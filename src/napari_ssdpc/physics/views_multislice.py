@@ -220,12 +220,12 @@ class ViewsMultislice:
         self._h = xp_.asarray(h_slab.astype(self.cdtype))
         self._wgt = xp_.asarray(wgt.astype(self.rdtype))
         self._ey, self._ex = xp_.asarray(ey % n), xp_.asarray(ex % n)
-        self._ux, self._uy = xp_.asarray(ux.astype(np.float32)), xp_.asarray(uy.astype(np.float32))
+        self._ux, self._uy = xp_.asarray(ux.astype(self.rdtype)), xp_.asarray(uy.astype(self.rdtype))
         self._inx, self._iny = xp_.asarray(inx), xp_.asarray(iny)
-        self._uk = tuple(xp_.asarray(u_k[:, i].astype(np.float32))[:, None, None] for i in range(2))
-        self._rho_k = xp_.asarray(rho_k.astype(np.float32))[:, None, None]
-        self._defocus_k = xp_.asarray(defocus_k.astype(np.float32))[:, None, None] if np.any(defocus_k) else None
-        self._eta0 = xp_.asarray(eta0.astype(np.float32))[..., None, None, None]
+        self._uk = tuple(xp_.asarray(u_k[:, i].astype(self.rdtype))[:, None, None] for i in range(2))
+        self._rho_k = xp_.asarray(rho_k.astype(self.rdtype))[:, None, None]
+        self._defocus_k = xp_.asarray(defocus_k.astype(self.rdtype))[:, None, None] if np.any(defocus_k) else None
+        self._eta0 = xp_.asarray(eta0.astype(self.rdtype))[..., None, None, None]
         self._kernels: list | None = None
         i0 = self._interpolate(self._intensity(None)[0])  # sample-free views: constant per lenslet
         self.i0 = lit_views(np.asarray(self.bk.to_host(i0.mean(axis=(1, 2))), float))
@@ -389,6 +389,60 @@ class ViewsMultislice:
             self._backward_chunk(screens, sl, g, kept, g_i, grad)
         grad = grad.reshape(len(screens), self.substeps, self.n, self.n).sum(axis=1)[::-1]
         return value, xp.ascontiguousarray(grad)
+
+    def pupil_misfit(self, dn, measured, weight=None, noll=(5, 6, 7, 8, 11)):
+        """The misfit of :meth:`misfit` and its gradient with respect to the pupil's terms: the
+        objective's Zernike coefficients and each lenslet's defocus (docs/aberrations.md).
+
+        The pupil's phase φ enters every lenslet field g = ifft(c · A e^{iφ}) (c the crop of the exit
+        spectrum); with X = fft(g) and P = fft(∂L/∂g* x 2) / m², ∂L/∂φ = −Im(X P*) at every crop
+        sample, and φ = 2π [Σ_j c_j Z_j(u) + d_k |u − u_k|² / ρ_k²] is linear in the terms. The
+        direct light I0_k does not depend on φ.
+
+        Parameters
+        ----------
+        dn : ndarray, (Z, ny, nx)
+            Δn of every voxel on the model grid, dimensionless.
+        measured : ndarray, (K, h, w)
+            The flat-fielded views on the ROI (:meth:`crop`).
+        weight : ndarray, broadcastable to (K, h, w), optional
+            W² per pixel; default 1.
+        noll : sequence of int
+            The Noll indices of the objective's terms (piston, tilts and defocus move the objects,
+            not the pupil: left out by default).
+
+        Returns
+        -------
+        value : float
+            The misfit, (flat-field units)².
+        grad_zernike : ndarray, float64, (len(noll),)
+            ∂misfit/∂c_j, per wave.
+        grad_defocus : ndarray, float64, (K,)
+            ∂misfit/∂d_k, per wave at the sub-aperture's edge.
+        """
+        from napari_ssdpc.physics.zernike import zernike
+
+        xp = self.xp
+        screens = self._screens(dn)
+        acc, _ = self._intensity(screens)
+        res = self._interpolate(acc) / self._i0 - xp.asarray(measured, self.rdtype)
+        wres = res if weight is None else res * xp.asarray(weight, self.rdtype)
+        value = 0.5 * float(xp.sum(res * wres))
+        g_i = self._interpolate.adjoint(wres / self._i0)
+        gz, gd = np.zeros(len(noll)), np.zeros(self.view_shape[0])
+        two_pi = 2 * math.pi
+        for sl in self._chunks():
+            g, _ = self._propagate_chunk(screens, sl, False)
+            gg = (2 * self._wgt[sl][..., None, None]) * g_i[None, None] * g
+            dphi = -xp.imag(self.bk.fft2(g) * xp.conj(self.bk.fft2(gg))) / (self.m * self.m)  # (s, Q, K, m, m)
+            ux, uy = self._ux[sl][..., None, :], self._uy[sl][..., :, None]
+            r = xp.hypot(ux, uy) / self.pupil.cutoff
+            theta = xp.arctan2(uy, ux)
+            for i, j in enumerate(noll):
+                gz[i] += two_pi * float(xp.sum(dphi * xp.where(r <= 1, zernike(j, xp.minimum(r, 1.0), theta), 0.0)))
+            q = ((ux - self._uk[0]) ** 2 + (uy - self._uk[1]) ** 2) / (self._rho_k * self._rho_k)
+            gd += two_pi * np.asarray(self.bk.to_host(xp.sum(dphi * q, axis=(0, 1, 3, 4))), float)
+        return value, gz, gd
 
     def _backward_chunk(self, screens, sl, g, kept, g_i, grad):
         """Add the source points ``sl``'s part of ∂L/∂Δn per slab to ``grad`` (far side first)."""

@@ -108,7 +108,8 @@ class Aberrations(SettingsModel):
             shift = max(abs(complex(*t.offset_um)) for t in odd)
             scale = max(abs(t.radius_scale - 1) for t in odd)
             parts.append(
-                f"{len(odd)} lenslets differ (defocus up to {worst:.3f} waves, centre up to {shift:.2f} µm, "
+                f"{len(odd)} {'lenslet differs' if len(odd) == 1 else 'lenslets differ'} (defocus up to {worst:.3f} "
+                f"waves, centre up to {shift:.2f} µm, "
                 f"radius up to {100 * scale:.1f} %)"
             )
         if self.condenser_offset_na != (0.0, 0.0):
