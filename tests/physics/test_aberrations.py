@@ -236,3 +236,20 @@ def test_the_pupil_gradient_matches_finite_differences():
     assert gz[1] == pytest.approx(central("c11"), rel=1e-5)
     assert gd[1] == pytest.approx(central("d"), rel=1e-5)
     assert np.count_nonzero(gd) == len(lenslets)  # every lenslet's defocus moves the misfit
+
+
+def test_the_objectives_aberration_leaves_the_field_stops_image_alone(optics):
+    """Without a sample every plane wave only takes a constant phase at the objective's pupil, before
+    the field stop: the white frame is the nominal one, while a lenslet's own defocus blurs its EI."""
+    from napari_ssdpc.simulation.camera import Camera
+    from napari_ssdpc.simulation.sample_free import white_intensity
+
+    camera = Camera(noise=False)
+    nominal = white_intensity(optics, camera=camera)
+    objective = optics.replace(aberrations=Aberrations(objective_zernike_waves=SPHERICAL))
+    np.testing.assert_array_equal(white_intensity(objective, camera=camera), nominal)
+    ln = _two(optics)[0]
+    lenslet = optics.replace(
+        aberrations=Aberrations(lenslets=(LensletTerms(row=ln.row, col=ln.col, defocus_waves=0.5),))
+    )
+    assert np.abs(white_intensity(lenslet, camera=camera) - nominal).max() > 0.05 * nominal.max()

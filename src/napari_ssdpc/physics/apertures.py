@@ -173,8 +173,9 @@ def subaperture_windows(lenslets, pupil: Pupil, du: float, nc: int, supersample:
     centres : ndarray, int, (K, 2)
         Lattice index (ix, iy) of each crop centre, the nearest to u_k (units of du).
     apertures : ndarray, float32 or complex64, (K, nc, nc)
-        A_k on the crop (rows y, columns x), amplitude in [0, 1]; complex with the pupil's phase
-        where the pupil is aberrated.
+        A_k on the crop (rows y, columns x), amplitude in [0, 1]; complex with the lenslet's own
+        defocus where it has one (the objective's phase is not in it: the simulator applies it at
+        the objective's pupil, before the field stop).
     """
     off = np.arange(nc) - nc // 2
     centres, apert = [], []
@@ -188,10 +189,10 @@ def subaperture_windows(lenslets, pupil: Pupil, du: float, nc: int, supersample:
 
         centres.append(c)
         a = np.sqrt(cell_fraction(inside, ux[None, :], uy[:, None], du, supersample))
-        if pupil.aberrated:  # the phase at the cell centres (the objective's and the lenslet's)
-            a = a * np.exp(1j * pupil.phase(ux[None, :], uy[:, None], u_k, rho_k, defocus or None))
+        if defocus:  # the lenslet's own phase at the cell centres (the objective's comes before the iris)
+            a = a * np.exp(1j * pupil.phase(ux[None, :], uy[:, None], u_k, rho_k, defocus, objective=False))
         apert.append(a)
-    return np.array(centres), np.array(apert, dtype=np.complex64 if pupil.aberrated else np.float32)
+    return np.array(centres), np.array(apert, dtype=np.complex64 if np.iscomplexobj(apert) else np.float32)
 
 
 # ---------------------------------------------------------------------------- source

@@ -250,7 +250,7 @@ class Pupil:
             return (dx * dx + dy * dy <= rho * rho) & self.objective(ux, uy)
         return soft_disk(xp.hypot(dx, dy), rho, step) * self.objective(ux, uy, step, xp)
 
-    def phase(self, ux, uy, u_k=None, rho=None, defocus=None, xp=np):
+    def phase(self, ux, uy, u_k=None, rho=None, defocus=None, xp=np, objective: bool = True):
         """2π [W(u) + d_k |u − u_k|² / ρ_k²], the pupil's phase, rad (0 for the nominal optics).
 
         Parameters
@@ -265,6 +265,9 @@ class Pupil:
             d_k, waves at the sub-aperture's edge (broadcastable); None: none.
         xp : module
             NumPy or CuPy.
+        objective : bool
+            Include the objective's term (False: the lenslet's alone, for a model that applies the
+            objective's phase before the field stop).
 
         Returns
         -------
@@ -274,7 +277,7 @@ class Pupil:
         from napari_ssdpc.physics.zernike import zernike_sum
 
         waves = 0.0 * ux + 0.0 * uy
-        if self.zernike:
+        if self.zernike and objective:
             r = xp.hypot(ux, uy) / self.cutoff
             waves = waves + xp.where(r <= 1.0, zernike_sum(self.zernike, xp.minimum(r, 1.0), xp.arctan2(uy, ux)), 0.0)
         if defocus is not None:
@@ -282,7 +285,7 @@ class Pupil:
             waves = waves + defocus * ((ux - u_k[0]) ** 2 + (uy - u_k[1]) ** 2) / (rho * rho)
         return (2 * math.pi) * waves
 
-    def field(self, ux, uy, lenslet, step: float | None = None, xp=np):
+    def field(self, ux, uy, lenslet, step: float | None = None, xp=np, objective: bool = True):
         """P_k(u) = A_k(u) exp(i phase) of one lenslet: real (A_k) for the nominal optics.
 
         Parameters
@@ -295,6 +298,8 @@ class Pupil:
             The sampling step, cycles/µm (a ramped edge).
         xp : module
             NumPy or CuPy.
+        objective : bool
+            Include the objective's phase (False: the path behind the field stop, lenslet alone).
 
         Returns
         -------
@@ -303,9 +308,9 @@ class Pupil:
         """
         u_k, rho, defocus = self.lenslet(lenslet)
         amplitude = self.subaperture(ux, uy, u_k, step, xp, rho)
-        if not self.aberrated:
+        if not (defocus or (objective and self.zernike)):
             return amplitude
-        return amplitude * xp.exp(1j * self.phase(ux, uy, u_k, rho, defocus or None, xp))
+        return amplitude * xp.exp(1j * self.phase(ux, uy, u_k, rho, defocus or None, xp, objective))
 
     def objective_cells(self, u2, du: float) -> np.ndarray:
         """P_obj on a lattice of step ``du``: every cell that touches |u| ≤ NA/λ passes (its exact,

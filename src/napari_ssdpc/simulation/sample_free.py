@@ -69,15 +69,16 @@ def white_intensity(
 
 
 def _incoherent_otf(lenslet, optics, du, nc, q=4):
-    """Normalised autocorrelation of the lenslet's pupil P_k (:meth:`Pupil.field`, with the optics'
-    aberrations) at lags that are multiples of du."""
+    """Normalised autocorrelation of the lenslet's pupil behind the field stop (its own sub-aperture
+    and defocus: without a sample the objective's phase is a constant phase per plane wave before
+    the stop, and leaves the stop's image alone) at lags that are multiples of du."""
     pupil = Pupil.of(optics)
     u_k, rho, _ = pupil.lenslet(lenslet)
     d = du / q
     m = int(math.ceil((rho + 2 * du) / d))
     t = np.arange(-m, m + 1) * d
     sx, sy = u_k[0] + t[None, :], u_k[1] + t[:, None]
-    a = pupil.field(sx, sy, lenslet) * 1.0  # bool -> float for the nominal optics
+    a = pupil.field(sx, sy, lenslet, objective=False) * 1.0  # bool -> float for the nominal optics
     N = sfft.next_fast_len(2 * len(t) + 1)
     ac = cpu().ifft2(np.abs(cpu().fft2(a, s=(N, N))) ** 2)  # complex for an aberrated pupil
     lag = (np.fft.fftfreq(nc, 1.0 / nc).astype(int) * q) % N
