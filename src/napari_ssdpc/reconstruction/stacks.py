@@ -19,6 +19,7 @@ import scipy.fft as sfft
 from napari_ssdpc.errors import Cancelled, SsdpcWarning
 from napari_ssdpc.physics import dpc_transfer, transfer
 from napari_ssdpc.physics.psf import LensletPSF
+from napari_ssdpc.physics.pupil import Pupil
 from napari_ssdpc.reconstruction.deconvolution import Band, MultiViewRL
 from napari_ssdpc.reconstruction.dpc import dpc_image
 from napari_ssdpc.settings.lenslets import HALVES, PAIRS
@@ -86,9 +87,10 @@ class DirectionalStacks:
         shift = float(np.abs(self.psf.shift_um(np.max(np.abs(z_um)))).max()) / pixel_um  # the largest parallax, px
         n = [sfft.next_fast_len(int(s + self.psf.support_px + 2 * math.ceil(shift)), real=True) for s in shape]
         self.fft_shape = tuple(n)
-        # the OTFs vanish outside |f| ≤ 2ρ (autocorrelation of the sub-aperture): keep that band
-        # (+2 frequency steps for the soft pupil edge); what lies outside is below 4e-4 of the DC
-        self.band = Band.disk(self.fft_shape, 2 * optics.subaperture_radius * pixel_um + 2.0 / min(n))
+        # the OTFs vanish outside |f| ≤ 2ρ (autocorrelation of the sub-aperture; the widest lenslet's
+        # own ρ): keep that band (+2 frequency steps for the soft pupil edge); what lies outside is
+        # below 4e-4 of the DC
+        self.band = Band.disk(self.fft_shape, 2 * Pupil.of(optics).rho_max * pixel_um + 2.0 / min(n))
         otf = {h: np.empty((len(m), len(z_um)) + self.band.box_shape, np.complex64) for h, m in halves.items()}
         for i, z in enumerate(z_um):
             full = self.band.take(self.psf.otf(float(z), self.fft_shape))
