@@ -378,17 +378,21 @@ class ViewsMultislice:
         screens = self._screens(dn)
         n_fields = len(screens) * self.substeps * self.n_sources * self.n * self.n
         keep = n_fields * self.cdtype.itemsize / 2**20 <= self.memory_mb
-        acc, store = self._intensity(screens, keep)
-        res = self._interpolate(acc) / self._i0 - xp.asarray(measured, self.rdtype)
-        wres = res if weight is None else res * xp.asarray(weight, self.rdtype)
-        value = 0.5 * float(xp.sum(res * wres))
-        g_i = self._interpolate.adjoint(wres / self._i0)  # ∂L/∂I on the crop grid, (K, m, m)
+        value, g_i, store = self._residual(screens, measured, weight, keep)
         grad = xp.zeros((len(screens) * self.substeps, self.n, self.n), self.rdtype)
         for sl, st in zip(self._chunks(), store):
             g, kept = st if st is not None else self._propagate_chunk(screens, sl, True)
             self._backward_chunk(screens, sl, g, kept, g_i, grad)
         grad = grad.reshape(len(screens), self.substeps, self.n, self.n).sum(axis=1)[::-1]
         return value, xp.ascontiguousarray(grad)
+
+    def _residual(self, screens, measured, weight, keep: bool):
+        """The misfit, ∂L/∂I on the crop grid (K, m, m) and, with ``keep``, what the backward pass needs."""
+        xp = self.xp
+        acc, store = self._intensity(screens, keep)
+        res = self._interpolate(acc) / self._i0 - xp.asarray(measured, self.rdtype)
+        wres = res if weight is None else res * xp.asarray(weight, self.rdtype)
+        return 0.5 * float(xp.sum(res * wres)), self._interpolate.adjoint(wres / self._i0), store
 
     def pupil_misfit(self, dn, measured, weight=None, noll=(5, 6, 7, 8, 11)):
         """The misfit of :meth:`misfit` and its gradient with respect to the pupil's terms: the
@@ -424,11 +428,7 @@ class ViewsMultislice:
 
         xp = self.xp
         screens = self._screens(dn)
-        acc, _ = self._intensity(screens)
-        res = self._interpolate(acc) / self._i0 - xp.asarray(measured, self.rdtype)
-        wres = res if weight is None else res * xp.asarray(weight, self.rdtype)
-        value = 0.5 * float(xp.sum(res * wres))
-        g_i = self._interpolate.adjoint(wres / self._i0)
+        value, g_i, _ = self._residual(screens, measured, weight, False)
         gz, gd = np.zeros(len(noll)), np.zeros(self.view_shape[0])
         two_pi = 2 * math.pi
         for sl in self._chunks():
