@@ -128,12 +128,24 @@ def _rims(white, cal):
     return out
 
 
+def _disks(rims, cal) -> list:
+    """Per rim, the stop's disk at each radius tried and the same disk falling off towards its rim
+    (Köhler illumination's fall-off), on the rim's window: [(disk, disk r²/R²) per radius]."""
+    centres, r_ei = np.asarray(cal.centres_px, float), float(cal.ei_radius_px)
+    out = []
+    for i, (x0, y0), _, data in rims:
+        yy, xx = np.mgrid[: data.shape[0], : data.shape[1]]
+        dx, dy = xx + x0 - centres[i, 0], yy + y0 - centres[i, 1]
+        r2 = (dx * dx + dy * dy) / r_ei**2
+        disks = [disk_fraction(dx, dy, r_ei + step, 1.0) for step in RADIUS_STEPS_PX]
+        out.append([(disk, disk * r2) for disk in disks])
+    return out
+
+
 def _misfits(rims, cal, optics: Optics, progress=None) -> np.ndarray:
-    """The rims' least misfit (over radius, scale and background) for every defocus: (K, D), and
-    the data's scale (K,)."""
+    """The rims' least misfit (over radius, scale, fall-off and background) for every defocus, (K, D)."""
     lenslets = [cal.lenslets[i] for i, *_ in rims]
-    size = rims[0][3].shape
-    centres = np.asarray(cal.centres_px, float)
+    disks = _disks(rims, cal)  # the same for every defocus
     out = np.zeros((len(rims), len(DEFOCUS_WAVES)))
     for j, d in enumerate(DEFOCUS_WAVES):
         terms = tuple(LensletTerms(row=ln.row, col=ln.col, defocus_waves=float(d)) for ln in lenslets)
@@ -141,17 +153,14 @@ def _misfits(rims, cal, optics: Optics, progress=None) -> np.ndarray:
         behind = {"lenslets": terms, "objective_zernike_waves": ()}
         blurred = optics.replace(aberrations=optics.aberrations.model_copy(update=behind).to_dict())
         kernels = LensletPSF(blurred, lenslets, shape=(41, 41), support_px=41).kernels(0.0)
-        for k, (i, (x0, y0), mask, data) in enumerate(rims):
-            yy, xx = np.mgrid[: size[0], : size[1]]
-            dx, dy = xx + x0 - centres[i, 0], yy + y0 - centres[i, 1]
+        for k, (_, _, mask, data) in enumerate(rims):
             best = np.inf
-            r2 = (dx * dx + dy * dy) / float(cal.ei_radius_px) ** 2
-            for step in RADIUS_STEPS_PX:
-                disk = disk_fraction(dx, dy, float(cal.ei_radius_px) + step, 1.0)
-                # the stop's disk, its light falling towards the rim (Köhler illumination's fall-off)
-                flat = signal.fftconvolve(disk, kernels[k], mode="same")[mask]
-                fall = signal.fftconvolve(disk * r2, kernels[k], mode="same")[mask]
-                a = np.stack([flat, fall, np.ones_like(flat)], axis=1)
+            for disk, fall in disks[k]:
+                a = np.stack(
+                    [signal.fftconvolve(b, kernels[k], mode="same")[mask] for b in (disk, fall)]
+                    + [np.ones(int(mask.sum()))],
+                    axis=1,
+                )
                 coef, *_ = np.linalg.lstsq(a, data[mask], rcond=None)
                 best = min(best, float(np.sum((a @ coef - data[mask]) ** 2)))
             out[k, j] = best
