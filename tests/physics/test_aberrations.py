@@ -236,6 +236,19 @@ def test_the_pupil_gradient_matches_finite_differences():
     assert gz[1] == pytest.approx(central("c11"), rel=1e-5)
     assert gd[1] == pytest.approx(central("d"), rel=1e-5)
     assert np.count_nonzero(gd) == len(lenslets)  # every lenslet's defocus moves the misfit
+    # one pass for both: the same numbers as the two calls
+    both = m0.misfit_and_pupil(dn, data, weight, noll=(7, 11))
+    assert both[0] == pytest.approx(value, rel=1e-12)
+    np.testing.assert_allclose(both[1], m0.misfit(dn, data, weight)[1], rtol=1e-10, atol=1e-14)
+    np.testing.assert_allclose(both[2], gz, rtol=1e-10)
+    np.testing.assert_allclose(both[3], gd, rtol=1e-10)
+    # the phase set on a model built nominal: the model built with those terms
+    other = {"c7": -0.05, "c11": 0.3, "d": -0.2}
+    moved = ViewsMultislice(base, lenslets, x, x, [-2.0, 0.0, 2.0], source_spacing_na=0.1, dtype=np.complex128)
+    defocus = np.zeros(len(lenslets))
+    defocus[1] = other["d"]
+    moved.set_pupil_phase((0,) * 6 + (other["c7"], 0, 0, 0, other["c11"]), defocus)
+    np.testing.assert_allclose(moved.views(dn), model(**other).views(dn), rtol=1e-12)
 
 
 def test_the_objectives_aberration_leaves_the_field_stops_image_alone(optics):

@@ -49,17 +49,43 @@ class ViewsAdjoint:
         grad : ndarray, (Z, ny, nx)
             ∂misfit/∂Δn of every voxel, in the array module of the model.
         """
+        value, grad, _, _ = self.misfit_and_pupil(dn, measured, weight, noll=None)
+        return value, grad
+
+    def misfit_and_pupil(self, dn, measured, weight=None, noll=(5, 6, 7, 8, 11)):
+        """The misfit of :meth:`misfit`, its gradient with respect to Δn and to the pupil's terms, from
+        one forward and one backward pass (the fit of the pupil to beads moves both).
+
+        Parameters
+        ----------
+        dn, measured, weight
+            As :meth:`misfit`.
+        noll : sequence of int or None
+            As :meth:`pupil_misfit`; None: the pupil's gradients are not computed (returned as None).
+
+        Returns
+        -------
+        value : float
+        grad : ndarray, (Z, ny, nx)
+            ∂misfit/∂Δn.
+        grad_zernike : ndarray, float64, (len(noll),) or None
+        grad_defocus : ndarray, float64, (K,) or None
+        """
         xp = self.xp
         screens = self._screens(dn)
         n_fields = len(screens) * self.substeps * self.n_sources * self.n * self.n
         keep = n_fields * self.cdtype.itemsize / 2**20 <= self.memory_mb
         value, g_i, store = self._residual(screens, measured, weight, keep)
         grad = xp.zeros((len(screens) * self.substeps, self.n, self.n), self.rdtype)
+        pupil = None if noll is None else (np.zeros(len(noll)), np.zeros(self.view_shape[0]))
         for sl, st in zip(self._chunks(), store):
             g, kept = st if st is not None else self._propagate_chunk(screens, sl, True)
             self._backward_chunk(screens, sl, g, kept, g_i, grad)
+            if pupil is not None:
+                self._pupil_chunk(sl, g, g_i, noll, *pupil)
         grad = grad.reshape(len(screens), self.substeps, self.n, self.n).sum(axis=1)[::-1]
-        return value, xp.ascontiguousarray(grad)
+        gz, gd = (None, None) if pupil is None else pupil
+        return value, xp.ascontiguousarray(grad), gz, gd
 
     def _residual(self, screens, measured, weight, keep: bool):
         """The misfit, ∂L/∂I on the crop grid (K, m, m) and, with ``keep``, what the backward pass needs."""
@@ -99,25 +125,28 @@ class ViewsAdjoint:
         grad_defocus : ndarray, float64, (K,)
             ∂misfit/∂d_k, per wave at the sub-aperture's edge.
         """
-        from napari_ssdpc.physics.zernike import zernike
-
-        xp = self.xp
         screens = self._screens(dn)
         value, g_i, _ = self._residual(screens, measured, weight, False)
         gz, gd = np.zeros(len(noll)), np.zeros(self.view_shape[0])
-        two_pi = 2 * math.pi
         for sl in self._chunks():
             g, _ = self._propagate_chunk(screens, sl, False)
-            gg = (2 * self._wgt[sl][..., None, None]) * g_i[None, None] * g
-            dphi = -xp.imag(self.bk.fft2(g) * xp.conj(self.bk.fft2(gg))) / (self.m * self.m)  # (s, Q, K, m, m)
-            ux, uy = self._ux[sl][..., None, :], self._uy[sl][..., :, None]
-            r = xp.hypot(ux, uy) / self.pupil.cutoff
-            theta = xp.arctan2(uy, ux)
-            for i, j in enumerate(noll):
-                gz[i] += two_pi * float(xp.sum(dphi * xp.where(r <= 1, zernike(j, xp.minimum(r, 1.0), theta), 0.0)))
-            q = ((ux - self._uk[0]) ** 2 + (uy - self._uk[1]) ** 2) / (self._rho_k * self._rho_k)
-            gd += two_pi * np.asarray(self.bk.to_host(xp.sum(dphi * q, axis=(0, 1, 3, 4))), float)
+            self._pupil_chunk(sl, g, g_i, noll, gz, gd)
         return value, gz, gd
+
+    def _pupil_chunk(self, sl, g, g_i, noll, gz, gd):
+        """Add the source points ``sl``'s part of ∂L/∂c_j and ∂L/∂d_k to ``gz`` and ``gd``."""
+        from napari_ssdpc.physics.zernike import zernike
+
+        xp, two_pi = self.xp, 2 * math.pi
+        gg = (2 * self._wgt[sl][..., None, None]) * g_i[None, None] * g
+        dphi = -xp.imag(self.bk.fft2(g) * xp.conj(self.bk.fft2(gg))) / (self.m * self.m)  # (s, Q, K, m, m)
+        ux, uy = self._ux[sl][..., None, :], self._uy[sl][..., :, None]
+        r = xp.hypot(ux, uy) / self.pupil.cutoff
+        theta = xp.arctan2(uy, ux)
+        for i, j in enumerate(noll):
+            gz[i] += two_pi * float(xp.sum(dphi * xp.where(r <= 1, zernike(j, xp.minimum(r, 1.0), theta), 0.0)))
+        q = ((ux - self._uk[0]) ** 2 + (uy - self._uk[1]) ** 2) / (self._rho_k * self._rho_k)
+        gd += two_pi * np.asarray(self.bk.to_host(xp.sum(dphi * q, axis=(0, 1, 3, 4))), float)
 
     def _backward_chunk(self, screens, sl, g, kept, g_i, grad):
         """Add the source points ``sl``'s part of ∂L/∂Δn per slab to ``grad`` (far side first)."""

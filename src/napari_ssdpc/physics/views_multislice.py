@@ -53,6 +53,7 @@ Frequencies are in cycles/µm, lengths in µm.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -243,6 +244,25 @@ class ViewsMultislice(ViewsAdjoint):
         temporaries = self.chunk * (4 * q * lenslets * m * m + 6 * n * n) * c
         return int(fields + pairs + kernels + 3 * s * n * n * c + temporaries)
 
+    def set_pupil_phase(self, zernike, defocus_k) -> None:
+        """Give the pupil other phase terms; its apertures, the source points and the direct light
+        I0_k (which a phase does not change) stay.
+
+        Parameters
+        ----------
+        zernike : sequence of float
+            The objective's coefficients, Noll j = 1, 2, ..., waves (rms-normalised).
+        defocus_k : array_like, (K,)
+            Each view's defocus, waves at its sub-aperture's edge.
+        """
+        c = tuple(float(v) for v in zernike)
+        self.pupil = dataclasses.replace(self.pupil, zernike=c if any(c) else ())
+        d = np.asarray(defocus_k, float).reshape(-1)
+        if d.shape != (self.view_shape[0],):
+            raise SsdpcError(f"{d.size} defocus terms for a model of {self.view_shape[0]} views")
+        self._defocus_k = self.xp.asarray(d.astype(self.rdtype))[:, None, None] if np.any(d) else None
+        self._kernels = None
+
     # --------------------------------------------------------------------------- forward
     def _screens(self, dn):
         """exp(i κ Δn) of every voxel, in propagation order (far side first), (Z, n, n)."""
@@ -274,7 +294,7 @@ class ViewsMultislice(ViewsAdjoint):
         )
         u2 = ux * ux + uy * uy
         phase = (2 * math.pi * self.z_exit) * (xp.sqrt(xp.maximum(self._k2 - u2, 0)) - self._eta0[sl])
-        if self.pupil.aberrated:  # the objective's and each lenslet's phase
+        if self.pupil.zernike or self._defocus_k is not None:  # the objective's and each lenslet's phase
             phase = phase + self.pupil.phase(ux, uy, self._uk, self._rho_k, self._defocus_k, xp)
         return (inside * xp.exp(1j * phase)).astype(self.cdtype)
 

@@ -46,7 +46,7 @@ from napari_ssdpc.reconstruction.bead_search import Stopped, overlap_groups
 from napari_ssdpc.reconstruction.dpc import phase_to_delta_n
 from napari_ssdpc.reconstruction.fit_objects import around_bead, bead_candidates, voxel_steps
 
-__all__ = ["SHAPE_MIN_RADIUS_PX", "fit_beads", "measure_beads"]
+__all__ = ["SHAPE_MIN_RADIUS_PX", "first_answer", "fit_beads", "measure_beads"]
 
 #: A footprint under this radius (pixels of the views) is too small to judge its shape: a strong
 #: 3.6 µm bead whose first answer kept a 1.2 µm footprint read 1.41 (a round one of 1.9-2.9 µm: 1.02-1.08).
@@ -195,11 +195,7 @@ def measure_beads(
     """
     views, _ = rec.views.measure(frame, name)
     if result is None:
-        tv = rec.method if rec.method.start is None else rec.method.start
-        if tv.name != "tv":
-            raise SsdpcError(f"the bead fit starts from the 'tv' answer; the reconstructor solves with '{tv.name}'")
-        sol = tv.solve(views, progress=progress, should_stop=should_stop)
-        dn, noise = phase_to_delta_n(sol.phase, rec.optics.wavelength_um, rec.dz), sol.report.get("tv_noise")
+        dn, noise = first_answer(rec, views, progress, should_stop)
     else:
         dn, noise = result.delta_n, result.settings.get("tv_noise")
     if noise is None:
@@ -218,3 +214,29 @@ def measure_beads(
         should_stop=should_stop,
         **options,
     )
+
+
+def first_answer(rec, views, progress=None, should_stop=None) -> tuple[np.ndarray, float]:
+    """The 'tv' answer of a frame's views, where the bead fit looks for beads, and the views' noise.
+
+    Parameters
+    ----------
+    rec : Reconstructor
+        Built with the 'tv' method (or its 'multislice' refinement).
+    views : ndarray, (K, H, W)
+        The frame's flat-fielded views.
+    progress, should_stop
+        Follow and stop the solve.
+
+    Returns
+    -------
+    dn : ndarray, (Z, ny, nx)
+        Δn of the 'tv' answer.
+    noise : float
+        The views' noise σ it estimated, flat-field units.
+    """
+    tv = rec.method if rec.method.start is None else rec.method.start
+    if tv.name != "tv":
+        raise SsdpcError(f"the bead fit starts from the 'tv' answer; the reconstructor solves with '{tv.name}'")
+    sol = tv.solve(views, progress=progress, should_stop=should_stop)
+    return phase_to_delta_n(sol.phase, rec.optics.wavelength_um, rec.dz), sol.report.get("tv_noise")

@@ -1,0 +1,125 @@
+"""The pupil fitted to beads (reconstruction/pupil_fit.py): the objective's terms and every view's defocus
+with the bead's sphere free, on views the same (small) multislice model made with a known pupil."""
+
+import numpy as np
+import pytest
+
+from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.physics.geometry import nominal_lenslets
+from napari_ssdpc.physics.transfer import lenslet_transfer_functions
+from napari_ssdpc.physics.views_multislice import ViewsMultislice
+from napari_ssdpc.reconstruction.bead_search import FINE_DZ_UM
+from napari_ssdpc.reconstruction.pupil_fit import BeadsAndPupil, PupilFit, check_pupil_fit
+from napari_ssdpc.reconstruction.sphere_volume import spheres_volume
+from napari_ssdpc.settings.aberrations import Aberrations
+from napari_ssdpc.settings.optics import Optics
+from napari_ssdpc.settings.reconstruction import MultisliceSettings
+
+N = 36  # view pixels per side
+NOISE = 0.003
+BEAD = np.array([[0.8, -0.5, 4.0, 2.5, 0.03]])  # x, y, z, R µm; Δn
+TRUTH = {"c5": 0.06, "c11": 0.15, "d": 0.3}
+
+
+class SmallViews:
+    """A front end with a coarse model (source points every 0.1 NA, no refinement): its views, mask, lenslets."""
+
+    def __init__(self, optics, lenslets):
+        self.optics, self.lenslets = optics, lenslets
+        self.x_um = self.y_um = (np.arange(N) - (N - 1) / 2) * optics.object_pixel_um
+        self.view_mask = np.ones((len(lenslets), N, N), bool)
+
+    def multislice_model(self, z_um, dz_um, roi, settings, *, backend=None, max_bytes=None):
+        return ViewsMultislice(
+            self.optics, self.lenslets, self.x_um, self.y_um, z_um, roi=roi, dz_um=dz_um, source_spacing_na=0.1,
+            source_subsamples=1, backend=backend,
+        )  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def bead_views():
+    """The views of one bead (Δn 0.03, 5 µm) through a pupil with astigmatism, spherical aberration and
+    every view defocused, with noise; the front end; the lenslets' keys."""
+    optics = Optics.paper().replace(medium_index=1.33, condenser_na=0.3)
+    every = nominal_lenslets(optics)
+    _, _, i0 = lenslet_transfer_functions(optics, every, (16, 16), optics.object_pixel_um)
+    lenslets = [ln for ln, i in zip(every, i0) if i >= 0.05 * max(i0)][::2]
+    front = SmallViews(optics, lenslets)
+    z = np.arange(-2.0, 10.0 + FINE_DZ_UM / 2, FINE_DZ_UM)
+    model = front.multislice_model(z, FINE_DZ_UM, None, None)
+    model.set_pupil_phase((0,) * 4 + (TRUTH["c5"],) + (0,) * 5 + (TRUTH["c11"],), np.full(len(lenslets), TRUTH["d"]))
+    clean = model.views(spheres_volume(BEAD, z, model.y_um, model.x_um, FINE_DZ_UM))
+    views = clean + NOISE * np.random.default_rng(5).standard_normal(clean.shape)
+    return front, views
+
+
+def test_the_pupil_and_the_bead_are_fitted_together(bead_views):
+    front, views = bead_views
+    start = BEAD.copy()
+    start[0, 2] += 1.5  # the bead's depth and size as a wrong pupil leaves them
+    start[0, 3] *= 1.2
+    start[0, 4] = 0.02
+    job = BeadsAndPupil(front, views, start, MultisliceSettings(), noll=(5, 6, 11))
+    k = len(front.lenslets)
+    fitted = job.fit(job.pack(start, np.zeros(3), np.full(k, 0.25)))  # |d| from the rims, c from zero
+    assert fitted.converged
+    spheres, zernike, defocus = job.unpack(fitted.q)
+    sigma = job.sigmas(fitted, NOISE)
+    sz, sd = sigma[5:8], sigma[8:]
+    assert zernike == pytest.approx([TRUTH["c5"], 0.0, TRUTH["c11"]], abs=0.01)
+    assert defocus == pytest.approx(np.full(k, TRUTH["d"]), abs=0.02)
+    assert spheres[0] == pytest.approx(BEAD[0], abs=0.05)
+    assert spheres[0, 4] == pytest.approx(BEAD[0, 4], abs=5e-4)
+    # the uncertainties are those of the noise: the errors within 4 sigma, every term determined
+    assert np.all(np.abs(zernike - [TRUTH["c5"], 0.0, TRUTH["c11"]]) < 4 * sz)
+    assert np.all(np.abs(defocus - TRUTH["d"]) < 4 * sd)
+    assert np.all(sz < 0.05) and np.all(sd < 0.05)
+    # the residual reaches the noise
+    assert job.residual_over_noise(fitted.cost, NOISE) == pytest.approx(1.0, abs=0.1)
+
+
+def test_the_sign_of_the_defocus_is_the_beads(bead_views):
+    """The rims give |d| alone: started at either sign (Δn known), the fit ends at the beads' sign."""
+    front, views = bead_views
+    job = BeadsAndPupil(front, views, BEAD, MultisliceSettings(), noll=(5, 11))
+    k = len(front.lenslets)
+    for sign in (1, -1):
+        fitted = job.fit(job.pack(BEAD, [0.0, 0.0], np.full(k, 0.25 * sign)), fixed_dn=0.03)
+        assert job.unpack(fitted.q)[2] == pytest.approx(np.full(k, TRUTH["d"]), abs=0.02)
+        assert job.residual_over_noise(fitted.cost, NOISE) < 1.1
+
+
+def _fit(sigma=0.01, converged=True, explained=True) -> PupilFit:
+    from napari_ssdpc.reconstruction.bead import Bead
+
+    bead = Bead((0.0, 0.0, 4.0), 5.0, 1.36, 0.03, 30.0 if not explained else 1.0, 1.5, True, explained)
+    keys = ((0, 0), (0, 1))
+    return PupilFit(
+        (5, 11), np.array([0.05, 0.2]), np.array([0.01, sigma]), keys, np.array([0.3, 0.31]), np.array([0.01, 0.01]),
+        (bead,), 12.0, 1.1, converged,
+    )  # fmt: skip
+
+
+def test_the_fitted_terms_go_into_the_optics_and_the_report():
+    fit = _fit()
+    ab = fit.aberrations(Aberrations(objective_zernike_waves=(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.1)))
+    assert ab.objective_zernike_waves[4] == 0.05 and ab.objective_zernike_waves[10] == 0.2
+    assert ab.objective_zernike_waves[6] == 0.1  # a term not fitted is kept
+    assert [t.defocus_waves for t in ab.lenslets] == [0.3, 0.31]
+    text = "\n".join(fit.report())
+    assert "Z11 +0.200 ± 0.010" in text and "12.0 -> 1.1 x the noise" in text
+    check_pupil_fit(fit, None)
+
+
+@pytest.mark.parametrize(
+    "fit, words",
+    [
+        (_fit(sigma=0.2), "does not determine Z11"),
+        (_fit(converged=False), "did not converge"),
+        (_fit(explained=False), "beads of another index than --bead-ri 1.36"),
+    ],
+)
+def test_a_fit_that_cannot_be_trusted_is_refused_in_one_line(fit, words):
+    with pytest.raises(SsdpcError, match=words) as err:
+        check_pupil_fit(fit, 1.36)
+    assert "\n" not in str(err.value) and "nothing written" in str(err.value)
