@@ -23,6 +23,7 @@ def test_fit_the_optics_in_the_calibrate_tab(make_napari_viewer, qtbot, monkeypa
     fit = calibrate.fit
     assert fit.flat.value.name == "PMMA bead flat" and fit.white.value.name == "PMMA bead white"
     assert fit.calibration.value.name == "PMMA bead white EI circles"
+    assert fit.beads.value is None  # the pupil is fitted to beads only when asked (minutes)
     fit.run()
     _steps.wait_for(qtbot, fit)
     assert shown == [], shown

@@ -68,3 +68,10 @@ def test_fit_optics_bad_input_is_one_line_and_writes_nothing(cli, files, sums, t
     rc, line = cli(["fit-optics", "--calibration", files / "cal.json", "--flat", flat, "-o", out])
     assert rc == 2 and words in line
     assert which == "same" or not out.exists()
+
+
+def test_bead_options_without_a_bead_frame_are_refused(cli, files, real_flat, tmp_path):
+    out = tmp_path / "fitted.json"
+    flat, _ = real_flat
+    rc, line = cli(["fit-optics", "--calibration", files / "cal.json", "--flat", flat, "--bead-ri", 1.46, "-o", out])
+    assert rc == 2 and "give the frame (FRAME)" in line and not out.exists()

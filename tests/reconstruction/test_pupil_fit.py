@@ -59,13 +59,13 @@ def test_the_pupil_and_the_bead_are_fitted_together(bead_views):
     start[0, 2] += 1.5  # the bead's depth and size as a wrong pupil leaves them
     start[0, 3] *= 1.2
     start[0, 4] = 0.02
-    job = BeadsAndPupil(front, views, start, MultisliceSettings(), noll=(5, 6, 11))
     k = len(front.lenslets)
-    fitted = job.fit(job.pack(start, np.zeros(3), np.full(k, 0.25)))  # |d| from the rims, c from zero
+    job = BeadsAndPupil(front, views, start, MultisliceSettings(), noll=(5, 6, 11), defocus0=np.full(k, 0.25))
+    fitted = job.fit(job.pack(start, np.zeros(3)))  # d0 = |d| from the rims, c from zero
     assert fitted.converged
     spheres, zernike, defocus = job.unpack(fitted.q)
     sigma = job.sigmas(fitted, NOISE)
-    sz, sd = sigma[5:8], sigma[8:]
+    sz, sd = sigma[5:8], sigma[8]
     assert zernike == pytest.approx([TRUTH["c5"], 0.0, TRUTH["c11"]], abs=0.01)
     assert defocus == pytest.approx(np.full(k, TRUTH["d"]), abs=0.02)
     assert spheres[0] == pytest.approx(BEAD[0], abs=0.05)
@@ -73,7 +73,7 @@ def test_the_pupil_and_the_bead_are_fitted_together(bead_views):
     # the uncertainties are those of the noise: the errors within 4 sigma, every term determined
     assert np.all(np.abs(zernike - [TRUTH["c5"], 0.0, TRUTH["c11"]]) < 4 * sz)
     assert np.all(np.abs(defocus - TRUTH["d"]) < 4 * sd)
-    assert np.all(sz < 0.05) and np.all(sd < 0.05)
+    assert np.all(sz < 0.05) and sd < 0.05
     # the residual reaches the noise
     assert job.residual_over_noise(fitted.cost, NOISE) == pytest.approx(1.0, abs=0.1)
 
@@ -81,10 +81,10 @@ def test_the_pupil_and_the_bead_are_fitted_together(bead_views):
 def test_the_sign_of_the_defocus_is_the_beads(bead_views):
     """The rims give |d| alone: started at either sign (Δn known), the fit ends at the beads' sign."""
     front, views = bead_views
-    job = BeadsAndPupil(front, views, BEAD, MultisliceSettings(), noll=(5, 11))
     k = len(front.lenslets)
     for sign in (1, -1):
-        fitted = job.fit(job.pack(BEAD, [0.0, 0.0], np.full(k, 0.25 * sign)), fixed_dn=0.03)
+        job = BeadsAndPupil(front, views, BEAD, MultisliceSettings(), noll=(5, 11), defocus0=np.full(k, 0.25 * sign))
+        fitted = job.fit(job.pack(BEAD, [0.0, 0.0]), fixed_dn=0.03)
         assert job.unpack(fitted.q)[2] == pytest.approx(np.full(k, TRUTH["d"]), abs=0.02)
         assert job.residual_over_noise(fitted.cost, NOISE) < 1.1
 

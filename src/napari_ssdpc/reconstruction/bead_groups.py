@@ -82,10 +82,10 @@ class GroupFit:
     def _local(self, roi, start, sign, dz: float, settings, region: BeadRegion | None = None):
         """A local fit on the planes the spheres fill (again on wider ones where one moves out of them);
         ``region``: the first try's, when already built."""
-        for _ in range(3):
+        for attempt in range(3):
             region = region or self._around(roi, start, dz, settings)
             p, value, converged = local_fit(region, start, sign, self.iterations, self.z_range, self.should_stop)
-            if region.covers(p):
+            if region.covers(p) or attempt == 2:  # the last region is kept: its views are the ones fitted
                 break
             start, region = p, None
         return p, value, converged, region

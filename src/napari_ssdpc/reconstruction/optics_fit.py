@@ -81,7 +81,13 @@ class OpticsFit:
 
 
 def fit_optics(
-    cal: Calibration, flat, optics: Optics | None = None, white=None, progress=None, beads: BeadFrame | None = None
+    cal: Calibration,
+    flat,
+    optics: Optics | None = None,
+    white=None,
+    progress=None,
+    beads: BeadFrame | None = None,
+    should_stop=None,
 ) -> OpticsFit:
     """Fit the condenser to a flat frame (the views' |focus| to a white frame, the pupil to beads).
 
@@ -98,6 +104,8 @@ def fit_optics(
         ``progress(done, total, label)`` while the views' focus is measured and the pupil fitted.
     beads : BeadFrame, optional
         A frame of beads: the objective's aberration and the views' defocus are fitted to it.
+    should_stop : callable, optional
+        True stops the fit of the pupil (:class:`~napari_ssdpc.errors.Cancelled`).
 
     Returns
     -------
@@ -123,7 +131,7 @@ def fit_optics(
         return OpticsFit(fitted, condenser, focus)
     pupil = fit_pupil(
         beads.config, fitted, flat, beads.frame, focus=focus, bead_ri=beads.bead_ri, name=beads.name,
-        progress=progress,
+        progress=progress, should_stop=should_stop,
     )  # fmt: skip
     optics_with = fitted.optics.replace(aberrations=pupil.aberrations(fitted.optics.aberrations).to_dict())
     fitted = dataclasses.replace(fitted, optics=optics_with, optics_fit={**fitted.optics_fit, "pupil": pupil.to_dict()})

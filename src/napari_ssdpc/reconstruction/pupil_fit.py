@@ -189,11 +189,20 @@ class BeadsAndPupil:
         The objective's fitted terms.
     base_zernike : sequence of float
         The optics' own coefficients (Noll from 1), waves: the fitted terms replace theirs.
+    defocus0 : array_like, (K,), optional
+        Each view's defocus d0_k, waves: the fit moves all of them by one common δ (the MLA's distance
+        from the Fourier plane; what differs between the views, their focal lengths, the white frame's
+        rims measure, :mod:`~napari_ssdpc.calibration.view_focus`); default 0.
     backend : optional
         Where the models run.
+
+    Attributes
+    ----------
+    defocus0 : ndarray, (K,)
+        May be set between fits (e.g. to the given optics' defocus).
     """
 
-    def __init__(self, measurements, views, spheres, settings, noll=NOLL, base_zernike=(), backend=None):
+    def __init__(self, measurements, views, spheres, settings, noll=NOLL, base_zernike=(), defocus0=None, backend=None):
         self.noll = tuple(int(j) for j in noll)
         self.spheres = np.asarray(spheres, float).reshape(-1, 5)
         self.regions: list[tuple[list[int], BeadRegion]] = []
@@ -207,20 +216,22 @@ class BeadsAndPupil:
             hi = float(np.max(s[:, 2] + s[:, 3])) + REGION_MARGIN_UM
             self.regions.append((group, BeadRegion(measurements, views, roi, lo, hi, FINE_DZ_UM, settings, backend)))
         self.views_k = self.regions[0][1].model.view_shape[0]
+        self.defocus0 = np.zeros(self.views_k) if defocus0 is None else np.asarray(defocus0, float).reshape(-1)
         base = list(base_zernike) + [0.0] * max(0, max(self.noll) - len(base_zernike))
         self._base = np.asarray(base, float)
         self.pixels = sum(float(np.sum(r.model.bk.to_host(r.weight))) for _, r in self.regions)
 
     # parameters: the spheres in their scaled units, then the pupil's terms in WAVE_SCALE
-    def pack(self, spheres, zernike, defocus) -> np.ndarray:
-        """The fit's parameter vector of spheres (B, 5), objective terms (J,) and view defocus (K,)."""
-        return np.concatenate([(np.asarray(spheres) / SCALE).ravel(), np.r_[zernike, defocus] / WAVE_SCALE])
+    def pack(self, spheres, zernike, delta: float = 0.0) -> np.ndarray:
+        """The fit's parameter vector of spheres (B, 5), objective terms (J,) and the views' common
+        defocus δ (waves) added to :attr:`defocus0`."""
+        return np.concatenate([(np.asarray(spheres) / SCALE).ravel(), np.r_[zernike, delta] / WAVE_SCALE])
 
     def unpack(self, q):
-        """Spheres (B, 5), objective terms (J,), view defocus (K,) of a parameter vector."""
+        """Spheres (B, 5), objective terms (J,), every view's defocus d0_k + δ (K,) of a parameter vector."""
         b = len(self.spheres)
         terms = np.asarray(q[5 * b :]) * WAVE_SCALE
-        return np.asarray(q[: 5 * b]).reshape(b, 5) * SCALE, terms[: len(self.noll)], terms[len(self.noll) :]
+        return np.asarray(q[: 5 * b]).reshape(b, 5) * SCALE, terms[: len(self.noll)], self.defocus0 + terms[-1]
 
     def _set_pupil(self, zernike, defocus) -> None:
         coeffs = self._base.copy()
@@ -265,7 +276,7 @@ class BeadsAndPupil:
     def free(self, fixed_dn, hold_pupil: bool) -> list[int]:
         """The parameters a fit moves: not Δn where it is known, not the pupil's terms when held."""
         b = len(self.spheres)
-        n = 5 * b + len(self.noll) + self.views_k
+        n = 5 * b + len(self.noll) + 1
         return [
             i
             for i in range(n)
@@ -513,32 +524,35 @@ def fit_pupil(
         spheres = np.array(
             [[*b.centre_um, b.diameter_um / 2, b.delta_n if bead_dn is None else bead_dn] for b in beads]
         )
-        job = BeadsAndPupil(rec.views, views, spheres, settings, noll, base_z, rec.backend)
         view_keys = [(ln.row, ln.col) for ln in rec.views.lenslets]
         d0 = start_defocus(view_keys, focus if sign else None, sign or 1.0, given)
-        fitted = job.fit(job.pack(spheres, zernike0, d0), fixed_dn=bead_dn, steps=steps, should_stop=should_stop)
+        job = BeadsAndPupil(rec.views, views, spheres, settings, noll, base_z, d0, rec.backend)
+        fitted = job.fit(job.pack(spheres, zernike0), fixed_dn=bead_dn, steps=steps, should_stop=should_stop)
         step("beads and pupil together")
         if best is None or fitted.cost < best[0].cost:
             best = (fitted, job, noise, rec)
     assert best is not None  # signs holds at least one start
     fitted, job, noise, rec = best
     spheres, zernike, defocus = job.unpack(fitted.q)
-    view_keys = [(ln.row, ln.col) for ln in rec.views.lenslets]
-    before = job.fit(
-        job.pack(spheres, zernike0, start_defocus(view_keys, None, 1.0, given)), fixed_dn=bead_dn, hold_pupil=True,
-        steps=steps, should_stop=should_stop,
-    )  # fmt: skip
-    step("the beads under the given pupil")
     sigma = job.sigmas(fitted, noise)
     n_spheres = 5 * len(spheres)
     beads = job.beads(fitted.q, fitted.converged, noise, rec.optics, config.reconstruction.multislice)
+    # each view's uncertainty: the common δ's and, where the rims gave d0_k, theirs
+    view_keys = [(ln.row, ln.col) for ln in rec.views.lenslets]
+    rims = {} if focus is None or not focus.blurred else dict(zip(focus.keys, focus.sigma_waves))
+    defocus_sigma = np.hypot(sigma[-1], [rims.get(k, 0.0) for k in view_keys])
+    job.defocus0 = start_defocus(view_keys, None, 1.0, given)  # the given optics' pupil
+    before = job.fit(
+        job.pack(spheres, zernike0), fixed_dn=bead_dn, hold_pupil=True, steps=steps, should_stop=should_stop
+    )
+    step("the beads under the given pupil")
     result = PupilFit(
         tuple(noll),
         zernike,
         sigma[n_spheres : n_spheres + len(noll)],
         tuple(view_keys),
         defocus,
-        sigma[n_spheres + len(noll) :],
+        defocus_sigma,
         tuple(beads),
         job.residual_over_noise(before.cost, noise),
         job.residual_over_noise(fitted.cost, noise),

@@ -1,10 +1,11 @@
-"""The Calibrate tab's "Fit the optics" step: the condenser's NA and centre from a flat frame layer
-and each view's focus from the white frame layer, as `ssdpc fit-optics` does (docs/aberrations.md)."""
+"""The Calibrate tab's "Fit the optics" step: the condenser's NA and centre from a flat frame layer,
+each view's |focus| from the white frame layer and the objective's aberration and the views' defocus
+from a frame of beads, as `ssdpc fit-optics` does (docs/aberrations.md)."""
 
 from __future__ import annotations
 
 import numpy as np
-from magicgui.widgets import Label
+from magicgui.widgets import FloatSpinBox, Label
 
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.layers import calibration_layers
@@ -47,12 +48,28 @@ class OpticsFitWidget(StepWidget):
             choices=image_layer_choices(napari_viewer, allow_none="none", prefer="white"),
             tooltip="white frame (condenser open): each view's focus from its elemental images' rims; none: skip",
         )
+        self.beads = LayerChoice(
+            label="bead frame",
+            choices=image_layer_choices(napari_viewer, allow_none="none", prefer="none"),  # none by default
+            tooltip="a raw frame of beads: the objective's aberration and every view's defocus, the beads' centres "
+            "and sizes free (minutes); none: skip",
+        )
+        self.bead_ri = FloatSpinBox(
+            label="bead RI (0: unknown)",
+            min=0.0,
+            max=3.0,
+            step=0.001,
+            value=0.0,
+            tooltip="the beads' refractive index, when known (held in the fit); the medium is the optics'",
+        )
         self.run_button, self.cancel_button, self.status = run_buttons(
-            "Fit the optics", "fit the condenser's NA and centre to the flat frame (and the views' focus)"
+            "Fit the optics",
+            "fit the condenser's NA and centre to the flat frame (the views' focus, the pupil to beads)",
         )
         self.result = wrap(Label(value=""))
         self.result.tooltip = "each fitted term with its uncertainty, the misfit before and after"
-        self.extend([self.calibration, self.flat, self.white, self.run_button, self.cancel_button, self.status])
+        self.extend([self.calibration, self.flat, self.white, self.beads, self.bead_ri])
+        self.extend([self.run_button, self.cancel_button, self.status])
         self.append(self.result)
         self.runner = JobRunner("Fit the optics", self.run_button, self.cancel_button, self.status)
         self.run_button.changed.connect(self.run)
@@ -61,20 +78,24 @@ class OpticsFitWidget(StepWidget):
     def run(self, *_):
         """Fit in a worker; the fitted calibration's layers and the report when done."""
         cal_layer, flat_layer, white_layer = self.calibration.value, self.flat.value, self.white.value
+        bead_layer, bead_ri = self.beads.value, float(self.bead_ri.value) or None
         if cal_layer is None or flat_layer is None:
             notify.error("fitting the optics needs a calibration and a flat frame: calibrate, and open the flat frame")
             return None
         cal, optics = calibration_of(cal_layer), self.session.optics
         frames = [
-            None if lyr is None else (lyr.data, frame_index(self.viewer, lyr)) for lyr in (flat_layer, white_layer)
+            None if lyr is None else (lyr.data, frame_index(self.viewer, lyr))
+            for lyr in (flat_layer, white_layer, bead_layer)
         ]
+        config = self.session.config() if bead_layer is not None else None
 
         def work(progress, should_stop):
-            from napari_ssdpc.reconstruction.optics_fit import fit_optics
+            from napari_ssdpc.reconstruction.optics_fit import BeadFrame, fit_optics
 
-            flat, white = (None if f is None else np.asarray(f[0] if f[1] is None else f[0][f[1]]) for f in frames)
+            flat, white, raw = (None if f is None else np.asarray(f[0] if f[1] is None else f[0][f[1]]) for f in frames)
             progress(0, 1, "fitting the condenser")
-            return fit_optics(cal, flat, optics, white, progress=lambda d, t: progress(d, t, "the views' focus"))
+            beads = None if raw is None else BeadFrame(config, raw, bead_ri, bead_layer.name)
+            return fit_optics(cal, flat, optics, white, progress=progress, beads=beads, should_stop=should_stop)
 
         stem = cal_layer.name.removesuffix(_CIRCLES)
         return self.runner.start(work, lambda fit: self._done(fit, f"{stem} fitted"), "Fit the optics")
