@@ -14,7 +14,8 @@ jointly in s and θ by L-BFGS-B on the gradient of one adjoint pass
 bead fitted far from its place under a wrong pupil keeps it there), so each start pupil's beads come
 from the full bead search (:func:`~napari_ssdpc.reconstruction.beads.measure_beads`) with that pupil;
 a blurred white frame gives each view's |d_k| (:mod:`~napari_ssdpc.calibration.view_focus`) but not
-its sign, so both signs are started and the lower misfit is kept.
+its sign, so both signs are started (the second only when the first leaves a bead unexplained: a pupil
+of the wrong sign cannot explain them) and the lower misfit is kept.
 
 The terms' uncertainties are the Gauss-Newton covariance σ² (Jᵀ W J)⁻¹ at the fit, with J the views'
 derivatives in every parameter (central differences) and σ the views' noise; a term the frame does not
@@ -492,7 +493,7 @@ def fit_pupil(
             f"{DN_LIMIT} (set --medium-index to the beads' medium)"
         )
     signs = (1.0, -1.0) if focus is not None and focus.blurred else (0.0,)
-    total = 3 * len(signs) + 1
+    total = 3 * len(signs) + 1  # a start that explains every bead ends the starts early
     done = 0
 
     def step(label: str) -> None:
@@ -531,6 +532,12 @@ def fit_pupil(
         step("beads and pupil together")
         if best is None or fitted.cost < best[0].cost:
             best = (fitted, job, noise, rec)
+        # a pupil of the wrong sign cannot explain the beads: the first start that explains every bead
+        # is the answer (the other's search and fit, half the time, are saved)
+        if fitted.converged and all(
+            b.explained for b in job.beads(fitted.q, True, noise, rec.optics, config.reconstruction.multislice)
+        ):
+            break
     assert best is not None  # signs holds at least one start
     fitted, job, noise, rec = best
     spheres, zernike, defocus = job.unpack(fitted.q)
@@ -545,6 +552,7 @@ def fit_pupil(
     before = job.fit(
         job.pack(spheres, zernike0), fixed_dn=bead_dn, hold_pupil=True, steps=steps, should_stop=should_stop
     )
+    done = total - 1  # the starts not needed are skipped
     step("the beads under the given pupil")
     result = PupilFit(
         tuple(noll),
