@@ -7,7 +7,8 @@ with the optics `ssdpc fit-optics FRAME` fitted to that frame, and with the true
 The paper's optics in water (n 1.33) at condenser NA 0.25, camera noise, the grid shifted by
 (3.7, −2.2) px and rotated by 0.4°; the default method `tv`, z −30..30 µm. Records each bead's
 integrated Δn near it against the truth and the depth of its Δn-weighted centroid, the fitted terms
-and the fit's time. Writes docs/pupil_fit_validation.json and prints a Markdown table.
+and the fit's time. Writes docs/pupil_fit_validation.json (with ``--condenser``, the condenser also
+at NA 0.26 and 0.01 NA off axis: docs/pupil_fit_validation-condenser.json) and prints a Markdown table.
 
     python docs/pupil_fit_validation.py --cache /tmp/cases
 """
@@ -41,15 +42,19 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--cache", default=None, help="folder for the simulated frames")
     p.add_argument("--fitted", default=None, help="a calibration fitted before (skips the fit)")
+    p.add_argument(
+        "--condenser", action="store_true", help="the condenser also at NA 0.26 and 0.01 NA off axis (optics: 0.25)"
+    )
     args = p.parse_args()
     nominal = val.paper_optics(0.25).replace(medium_index=MEDIUM)
     terms = tuple(
         LensletTerms(row=ln.row, col=ln.col, defocus_waves=DEFOCUS) for ln in Grid.nominal(nominal).lenslets(nominal)
     )
-    truth = nominal.replace(aberrations=Aberrations(objective_zernike_waves=(0.0,) * 10 + (SPHERICAL,), lenslets=terms))
-    case = val.simulate_case(
-        "pf-two", ph.Spheres(BEADS, medium_index=MEDIUM), truth, cache_dir=args.cache, source_step=4
-    )
+    offset = (0.01, 0.0) if args.condenser else (0.0, 0.0)
+    ab = Aberrations(objective_zernike_waves=(0.0,) * 10 + (SPHERICAL,), lenslets=terms, condenser_offset_na=offset)
+    truth = nominal.replace(aberrations=ab, condenser_na=0.26 if args.condenser else 0.25)
+    name = "pf-two-condenser" if args.condenser else "pf-two"
+    case = val.simulate_case(name, ph.Spheres(BEADS, medium_index=MEDIUM), truth, cache_dir=args.cache, source_step=4)
     cal = calibrate(case.white, nominal)
     seconds = None
     if args.fitted:
@@ -57,23 +62,25 @@ def main():
     else:
         t0 = time.perf_counter()
         cfg = val.run_config(nominal, z=Z_UM, dz=1.0)
-        fit = fit_optics(cal, case.flat, nominal, case.white, beads=BeadFrame(cfg, case.frame, None, "pf-two"))
+        fit = fit_optics(cal, case.flat, nominal, case.white, beads=BeadFrame(cfg, case.frame, None, name))
         seconds = time.perf_counter() - t0
         print("\n".join(fit.report()), flush=True)
         fitted = fit.calibration
     runs = {
-        "nominal optics": cal,
-        "pupil fitted to the frame": fitted,
-        "true optics": dataclasses.replace(cal, optics=truth),
+        "nominal optics": (nominal, cal),
+        "pupil fitted to the frame": (nominal, fitted),
+        "true optics": (truth, dataclasses.replace(cal, optics=truth)),
     }
     out = {"fit_seconds": seconds, "fitted": fitted.optics_fit.get("pupil"), "rows": []}
-    for how, c in runs.items():
-        rec = Reconstructor(val.run_config(nominal, z=Z_UM, dz=1.0), c, flat=case.flat)
+    for how, (optics, c) in runs.items():
+        rec = Reconstructor(val.run_config(optics, z=Z_UM, dz=1.0), c, flat=case.flat)
         m = masses_and_false(rec.reconstruct(case.frame), BEADS, MEDIUM)
         row = {"optics": how, "masses": m["masses"], "centroids_z_um": m["centroids_z_um"], "false": m["false"]}
         out["rows"].append(row)
         print(json.dumps(row, default=float), flush=True)
-    (HERE / "pupil_fit_validation.json").write_text(json.dumps(out, indent=1, default=float))
+    (HERE / f"{name.replace('pf-two', 'pupil_fit_validation')}.json").write_text(
+        json.dumps(out, indent=1, default=float)
+    )
     print("\n| optics | integrated Δn / true (z −10, +15 µm) | centroid depth error (µm) | false Δn |")
     print("| --- | --- | --- | --- |")
     for r in out["rows"]:

@@ -31,6 +31,9 @@ _GUI_WORDS = (
     (r"--z\b", "z min / z max (Method tab)"),
     (r"--dz\b", "dz (Method tab)"),
     (r"--alpha\b", "the Tikhonov α (Reconstruct tab)"),
+    (r"--bead-ri\b", "the bead RI (Fit the optics, Calibrate tab)"),
+    (r"\(set --medium-index to the beads' medium\)", "(set the medium's index in the Optics tab)"),
+    (r"--medium-index\b", "the medium's index (Optics tab)"),
 )
 
 
