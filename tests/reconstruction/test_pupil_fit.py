@@ -9,7 +9,8 @@ from napari_ssdpc.physics.geometry import nominal_lenslets
 from napari_ssdpc.physics.transfer import lenslet_transfer_functions
 from napari_ssdpc.physics.views_multislice import ViewsMultislice
 from napari_ssdpc.reconstruction.bead_search import FINE_DZ_UM
-from napari_ssdpc.reconstruction.pupil_fit import BeadsAndPupil, PupilFit, check_pupil_fit
+from napari_ssdpc.reconstruction.beads_and_pupil import BeadsAndPupil
+from napari_ssdpc.reconstruction.pupil_fit import PupilFit, check_pupil_fit
 from napari_ssdpc.reconstruction.sphere_volume import spheres_volume
 from napari_ssdpc.settings.aberrations import Aberrations
 from napari_ssdpc.settings.optics import Optics

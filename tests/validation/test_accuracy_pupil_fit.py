@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from napari_ssdpc.calibration import calibrate
-from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.reconstruction.optics_fit import BeadFrame, fit_optics
 from napari_ssdpc.settings.aberrations import Aberrations, LensletTerms
@@ -56,9 +55,3 @@ def test_the_fitted_pupil_is_written_and_used(fitted):
     ab = fit.calibration.optics.aberrations
     assert ab.objective_zernike_waves[10] == pytest.approx(fit.pupil.zernike_waves[-1], abs=1e-4)
     assert "pupil" in fit.calibration.optics_fit
-
-
-def test_a_frame_without_beads_is_refused(fitted):
-    _, case, cal, config = fitted
-    with pytest.raises(SsdpcError, match="no bead found"):
-        fit_optics(cal, case.flat, cal.optics, beads=BeadFrame(config, case.flat, None, "flat.tif"))
