@@ -72,11 +72,7 @@ class FocusFit:
         -------
         Aberrations
         """
-        terms = {(t.row, t.col): t for t in base.lenslets}
-        for (row, col), d in zip(self.keys, self.defocus_waves):
-            old = terms.get((row, col), LensletTerms(row=row, col=col))
-            terms[(row, col)] = old.model_copy(update={"defocus_waves": round(float(d), 4)})
-        return base.model_copy(update={"lenslets": tuple(terms.values())})
+        return base.with_defocus(self.keys, self.defocus_waves)
 
     @property
     def blurred(self) -> bool:

@@ -36,7 +36,7 @@ from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.reconstruction.bead import Bead
 from napari_ssdpc.reconstruction.bead_search import DN_LIMIT
 from napari_ssdpc.reconstruction.beads_and_pupil import NOLL, STEPS, BeadsAndPupil
-from napari_ssdpc.settings.aberrations import Aberrations, LensletTerms
+from napari_ssdpc.settings.aberrations import Aberrations
 
 __all__ = ["UNDETERMINED_WAVES", "PupilFit", "check_pupil_fit", "fit_pupil"]
 
@@ -92,14 +92,7 @@ class PupilFit:
         -------
         Aberrations
         """
-        coeffs = list(base.objective_zernike_waves) + [0.0] * max(0, max(self.noll) - len(base.objective_zernike_waves))
-        for j, c in zip(self.noll, self.zernike_waves):
-            coeffs[j - 1] = round(float(c), 4)
-        terms = {(t.row, t.col): t for t in base.lenslets}
-        for (row, col), d in zip(self.keys, self.defocus_waves):
-            old = terms.get((row, col), LensletTerms(row=row, col=col))
-            terms[(row, col)] = old.model_copy(update={"defocus_waves": round(float(d), 4)})
-        return base.model_copy(update={"objective_zernike_waves": tuple(coeffs), "lenslets": tuple(terms.values())})
+        return base.with_zernike(self.noll, self.zernike_waves).with_defocus(self.keys, self.defocus_waves)
 
     def undetermined(self) -> list[str]:
         """The terms whose uncertainty exceeds :data:`UNDETERMINED_WAVES` (names for people)."""
@@ -177,15 +170,9 @@ def with_pupil(cal, zernike_full, keys, defocus):
     -------
     Calibration
     """
-    ab = cal.optics.aberrations
-    terms = {(t.row, t.col): t for t in ab.lenslets}
-    for k, d in zip(keys, defocus):
-        old = terms.get(k, LensletTerms(row=k[0], col=k[1]))
-        terms[k] = old.model_copy(update={"defocus_waves": round(float(d), 4)})
-    new = ab.model_copy(
-        update={"objective_zernike_waves": tuple(float(c) for c in zernike_full), "lenslets": tuple(terms.values())}
-    )
-    return dataclasses.replace(cal, optics=cal.optics.replace(aberrations=new.to_dict()))
+    noll = range(1, len(zernike_full) + 1)
+    ab = cal.optics.aberrations.with_zernike(noll, zernike_full).with_defocus(keys, defocus)
+    return dataclasses.replace(cal, optics=cal.optics.replace(aberrations=ab.to_dict()))
 
 
 def fit_pupil(

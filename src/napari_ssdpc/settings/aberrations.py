@@ -94,6 +94,47 @@ class Aberrations(SettingsModel):
                 return t
         return LensletTerms(row=row, col=col)
 
+    def with_defocus(self, keys, defocus) -> Aberrations:
+        """These aberrations with the given lenslets' defocus (their other terms kept).
+
+        Parameters
+        ----------
+        keys : sequence of (int, int)
+            The lenslets' (row, col).
+        defocus : sequence of float
+            Their defocus, waves at the sub-aperture's edge (rounded to 0.0001).
+
+        Returns
+        -------
+        Aberrations
+        """
+        terms = {(t.row, t.col): t for t in self.lenslets}
+        for (row, col), d in zip(keys, defocus, strict=True):
+            old = terms.get((row, col), LensletTerms(row=row, col=col))
+            terms[(row, col)] = old.model_copy(update={"defocus_waves": round(float(d), 4)})
+        return self.model_copy(update={"lenslets": tuple(terms.values())})
+
+    def with_zernike(self, noll, coefficients) -> Aberrations:
+        """These aberrations with the given objective terms (the others kept).
+
+        Parameters
+        ----------
+        noll : sequence of int
+            Noll indices.
+        coefficients : sequence of float
+            Their coefficients, waves rms (rounded to 0.0001).
+
+        Returns
+        -------
+        Aberrations
+        """
+        c = list(self.objective_zernike_waves) + [0.0] * max(
+            0, max(noll, default=0) - len(self.objective_zernike_waves)
+        )
+        for j, v in zip(noll, coefficients, strict=True):
+            c[j - 1] = round(float(v), 4)
+        return self.model_copy(update={"objective_zernike_waves": tuple(c)})
+
     def summary(self) -> str:
         """One line for people: the objective's terms and how many lenslets differ, or 'none'."""
         if self.is_nominal:
