@@ -106,12 +106,8 @@ class ViewsAdjoint:
 
         Parameters
         ----------
-        dn : ndarray, (Z, ny, nx)
-            Δn of every voxel on the model grid, dimensionless.
-        measured : ndarray, (K, h, w)
-            The flat-fielded views on the ROI (:meth:`crop`).
-        weight : ndarray, broadcastable to (K, h, w), optional
-            W² per pixel; default 1.
+        dn, measured, weight
+            As :meth:`misfit`.
         noll : sequence of int
             The Noll indices of the objective's terms (piston, tilts and defocus move the objects,
             not the pupil: left out by default).
