@@ -61,3 +61,12 @@ def test_the_condenser_warning_names_the_fit_in_the_dock():
         warn_condenser_na((0.262, 5.0, 1e-3), Optics.paper().replace(condenser_na=0.25), "flat frame", True)
     text = gui_words(str(caught[0].message))
     assert "with Fit the optics (Calibrate tab)" in text and "--" not in text
+
+
+def test_the_instruments_notices_name_the_fit_in_the_dock():
+    from napari_ssdpc.calibration.view_focus import rims_notice
+
+    for note in (rims_notice(0.47), rims_notice(0.47, "the calibration's white frame")):
+        text = gui_words(note)
+        assert "with Fit the optics (Calibrate tab: the bead frame, the flat and the white frame)" in text
+        assert "--" not in text and "`ssdpc" not in text

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from napari_ssdpc.calibration import calibrate
-from napari_ssdpc.calibration.view_focus import BLURRED_WAVES, fit_view_focus
-from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.calibration.result import Calibration
+from napari_ssdpc.calibration.view_focus import BLURRED_WAVES, fit_view_focus, rims_unmodelled
+from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.physics.geometry import nominal_lenslets
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.settings.aberrations import Aberrations, LensletTerms
@@ -24,9 +25,12 @@ def cal():
     return calibrate(white_frame(OPTICS, grid=GRID, rng=1), OPTICS)
 
 
+def _terms(defocus: dict):
+    return tuple(LensletTerms(row=r, col=c, defocus_waves=float(d)) for (r, c), d in defocus.items())
+
+
 def _white(defocus: dict):
-    terms = tuple(LensletTerms(row=r, col=c, defocus_waves=float(d)) for (r, c), d in defocus.items())
-    return white_frame(OPTICS.replace(aberrations=Aberrations(lenslets=terms)), grid=GRID, rng=2)
+    return white_frame(OPTICS.replace(aberrations=Aberrations(lenslets=_terms(defocus))), grid=GRID, rng=2)
 
 
 def test_an_instrument_in_focus_reads_in_focus(cal):
@@ -65,3 +69,20 @@ def test_rims_that_cannot_be_measured_are_refused(cal):
         fit_view_focus(white, overlapping, OPTICS)
     with pytest.raises(SsdpcError, match="shape"):
         fit_view_focus(np.zeros((10, 10)), cal, OPTICS)
+
+
+def test_the_calibration_says_when_the_views_are_out_of_focus(cal):
+    """`calibrate` looks at two views' rims on every white frame (0.2-wave steps): in focus it reads
+    under the threshold (measured 0.09) and says nothing; with every view 0.5 waves out of focus it
+    reads 0.47, says so naming `ssdpc fit-optics`, and keeps the number in the JSON. Optics that give
+    the lenslets their defocus (a fitted calibration) are not told again."""
+    assert cal.rim_defocus_waves is not None and cal.rim_defocus_waves < BLURRED_WAVES
+    off = {(ln.row, ln.col): 0.5 for ln in nominal_lenslets(OPTICS)}
+    with pytest.warns(SsdpcWarning, match=r"rims are blurred .* 0\.4\d waves.*ssdpc fit-optics"):
+        blurred = calibrate(_white(off), OPTICS)
+    assert blurred.rim_defocus_waves == pytest.approx(0.5, abs=0.06)
+    assert Calibration.from_dict(blurred.to_dict()).rim_defocus_waves == blurred.rim_defocus_waves
+    modelled = OPTICS.replace(aberrations=Aberrations(lenslets=_terms(off)))
+    assert rims_unmodelled(blurred.rim_defocus_waves, OPTICS) and not rims_unmodelled(0.47, modelled)
+    old = dataclasses.replace(cal, rim_defocus_waves=None)
+    assert "rim_defocus_waves" not in old.to_dict()  # a calibration without rims keeps its form

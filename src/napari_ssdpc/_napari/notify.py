@@ -15,6 +15,10 @@ __all__ = ["error", "gui_words", "info", "warning"]
 #: (pattern, words) for the flags the core's messages name, in the order they are applied.
 _GUI_WORDS = (
     (r"with `ssdpc fit-optics --calibration CAL --flat FLAT -o FITTED\.json`", "with Fit the optics (Calibrate tab)"),
+    (
+        r"with `ssdpc fit-optics BEADS\.tif --calibration CAL --flat FLAT --white WHITE -o FITTED\.json`",
+        "with Fit the optics (Calibrate tab: the bead frame, the flat and the white frame)",
+    ),
     (r"--calibration\b", "the calibration (Method tab)"),
     (r"--flat\b", "the flat frame (Reconstruct tab)"),
     (r"reconstruct with --method (\w+)", r"choose the phase method '\1' (Method tab)"),

@@ -14,6 +14,9 @@ everything else is measured on the frame:
    objective pupil on a white frame, the condenser disk on a flat or sample frame).
 4. Table: (row, col), EI centre, a_k and u_k from the measured centre, the part of the
    lenslet inside the pupil, the halves of paper Eq. 5 and the brightness.
+5. On a white frame, the views' focus (``view_focus``): the rims of the EIs nearest the axis
+   against the stop's image through in-focus and defocused lenslets; views out of focus that the
+   optics do not model are reported, naming `ssdpc fit-optics` (and again on every frame).
 
 A user's rough EI positions (``guess``, e.g. from the napari Points layer) replace the
 ring filter when detection fails. Coordinates: x = column, y = row,
@@ -29,10 +32,12 @@ import numpy as np
 
 from napari_ssdpc.calibration.axis import FULL_PUPIL, all_cells, decide_kind, ei_brightness, fit_axis, pupil_lenslets
 from napari_ssdpc.calibration.disks import Candidates, Circle, find_disks, noise_sigma, rim_circle
+from napari_ssdpc.calibration.frame import validated
 from napari_ssdpc.calibration.lattice_fit import MIN_AFFINE, AffineLattice, assign
 from napari_ssdpc.calibration.refine import OUTLIER, SMALL_EI_PX, all_rims, fit_lattice, outshone, refine_centres
-from napari_ssdpc.calibration.result import Calibration, validated
+from napari_ssdpc.calibration.result import Calibration
 from napari_ssdpc.calibration.saturation import FULL_SCALE_CODES
+from napari_ssdpc.calibration.view_focus import rim_defocus, rims_notice, rims_unmodelled
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 from napari_ssdpc.physics.geometry import mla_to_frequency
 from napari_ssdpc.physics.lattice import Grid, xy_pair
@@ -215,7 +220,7 @@ def calibrate(frame, optics: Optics, *, kind: str = "auto", guess=None, axis=Non
             SsdpcWarning,
             stacklevel=2,
         )
-    return Calibration(
+    cal = Calibration(
         grid=grid,
         ei_radius_px=r_ei,
         optics=optics,
@@ -233,6 +238,11 @@ def calibrate(frame, optics: Optics, *, kind: str = "auto", guess=None, axis=Non
         aspect=lat.aspect,
         kind_evidence={**evidence, "guided": guess is not None},
     )
+    if kind == "white":  # the condenser open: the rims are the field stop's image through each lenslet
+        cal.rim_defocus_waves = d = rim_defocus(img, cal, optics)
+        if d is not None and rims_unmodelled(d, optics):
+            warnings.warn(rims_notice(d), SsdpcWarning, stacklevel=2)
+    return cal
 
 
 def _check_prior(lat: AffineLattice, r_ei: float, optics: Optics) -> None:

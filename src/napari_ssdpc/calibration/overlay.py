@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 
 from napari_ssdpc._version import SOFTWARE
-from napari_ssdpc.calibration.result import Calibration, validated
+from napari_ssdpc.calibration.frame import validated
+from napari_ssdpc.calibration.result import Calibration
 from napari_ssdpc.files import atomic_write
 
 

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from napari_ssdpc.calibration.frame import validated
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.files import atomic_write
 from napari_ssdpc.physics.lattice import Grid, xy_pair
@@ -71,6 +72,10 @@ class Calibration:
         (NaN where the axis was given or assumed: ``kind_evidence["axis"]``).
     kind : str
         "white", "flat" or "sample"; ``kind_evidence`` says why and how sure.
+    rim_defocus_waves : float or None
+        The views' defocus the white frame's elemental-image rims show (the views nearest the axis,
+        waves at the sub-aperture's edge; :func:`~napari_ssdpc.calibration.view_focus.rim_defocus`);
+        None where the frame was not a white frame.
     optics_fit : dict
         What `ssdpc fit-optics` fitted into ``optics`` from the user's frames (each part's terms,
         uncertainties and misfit; empty for a calibration of the nominal optics).
@@ -100,6 +105,7 @@ class Calibration:
     aspect: float = 0.0
     kind_evidence: dict = field(default_factory=dict)
     optics_fit: dict = field(default_factory=dict)
+    rim_defocus_waves: float | None = None
 
     def __post_init__(self) -> None:
         k = len(self.lenslets)
@@ -212,6 +218,8 @@ class Calibration:
         }
         if self.optics_fit:  # a calibration of the nominal optics keeps its old form and checksum
             d["optics_fit"] = self.optics_fit
+        if self.rim_defocus_waves is not None:  # so does one from before the rims were measured
+            d["rim_defocus_waves"] = float(self.rim_defocus_waves)
         return {**d, "checksum": content_checksum(d)}
 
     @classmethod
@@ -273,6 +281,7 @@ class Calibration:
                 aspect=float(d.get("aspect", 0.0)),
                 kind_evidence=dict(d.get("kind_evidence", {})),
                 optics_fit=dict(d.get("optics_fit", {})),
+                rim_defocus_waves=None if d.get("rim_defocus_waves") is None else float(d["rim_defocus_waves"]),
             )
         except SsdpcError:
             raise
@@ -372,34 +381,3 @@ class Calibration:
         except (json.JSONDecodeError, UnicodeDecodeError):
             raise SsdpcError(f"{path}: corrupt calibration JSON; re-run `ssdpc calibrate`") from None
         return cls.from_dict(d, source=str(path), verify=verify)
-
-
-# ------------------------------------------------------------------ validation
-def validated(frame, name="frame") -> np.ndarray:
-    """The frame as a float32 (H, W) array; one-line SsdpcError for anything else.
-
-    Parameters
-    ----------
-    frame : array_like
-    name : str
-        How messages name it.
-
-    Returns
-    -------
-    ndarray, float32, (H, W)
-    """
-    a = np.asarray(frame)
-    if a.dtype.kind not in "uif":
-        raise SsdpcError(
-            f"{name}: dtype {a.dtype} is not a grey-level image; give the raw camera frame (integer or float)"
-        )
-    if a.ndim != 2:
-        hint = "; pass one frame, e.g. frames[0]" if a.ndim == 3 else ""
-        raise SsdpcError(f"{name}: expected a 2D frame (y, x), got shape {a.shape}{hint}")
-    if min(a.shape) < 16:
-        raise SsdpcError(f"{name}: shape {a.shape} is too small for a light-field frame; give the full camera frame")
-    img = a.astype(np.float32, copy=False)
-    if a.dtype.kind == "f" and not np.all(np.isfinite(img)):  # an integer frame is finite
-        bad = int(img.size - np.count_nonzero(np.isfinite(img)))
-        raise SsdpcError(f"{name}: {bad} NaN/inf pixels; replace them or re-export the frame")
-    return img

@@ -19,15 +19,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
+import scipy.fft as sfft
 
+from napari_ssdpc.backend import cpu
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.apertures import disk_fraction
 from napari_ssdpc.physics.psf import LensletPSF
 from napari_ssdpc.settings.aberrations import Aberrations, LensletTerms
 from napari_ssdpc.settings.optics import Optics
 
-__all__ = ["FocusFit", "fit_view_focus"]
+__all__ = ["FocusFit", "fit_view_focus", "rim_defocus", "rims_notice", "rims_unmodelled"]
 
 #: The defocus values the rims are compared with, waves at the sub-aperture's edge.
 DEFOCUS_WAVES = np.round(np.arange(0.0, 1.51, 0.1), 3)
@@ -37,6 +38,12 @@ RADIUS_STEPS_PX = np.arange(-1.0, 1.01, 0.25)
 #: 0.07 in focus and 0.005 for a view at 0.16 (near focus the rim's width changes as d², and the
 #: model's misfit of about 1 % hides it), 0.25-0.91 within 0.035 from 0.29 to 0.89.
 BLURRED_WAVES = 0.2
+#: The quick look every white frame's calibration takes (:func:`rim_defocus`): the views nearest the
+#: axis, defocus every 0.2 waves (0.35 s on 2 cores; simulated white frames read 0.09 in focus and
+#: 0.47 for views at 0.48, where all 16 views and 0.1 steps read 0.07 and 0.48).
+QUICK_LENSLETS, QUICK_DEFOCUS = 2, np.round(np.arange(0.0, 1.61, 0.2), 3)
+#: The PSF kernel the rims are blurred with, px.
+KERNEL_PX = 41
 #: The rim's band: this far inside and outside the EI radius, px.
 INSIDE_PX, OUTSIDE_PX = 10, 8
 
@@ -82,12 +89,9 @@ class FocusFit:
 
     def notice(self) -> str:
         """One line for people: the views' rims are blurred, what it means and what to do."""
-        d = float(np.median(self.defocus_waves))
         return (
-            f"the elemental images' rims are blurred as by a defocus of {d:.2f} waves at each sub-aperture's edge "
-            "(an in-focus instrument reads under 0.1): the camera is not in the lenslets' focal plane, or the MLA "
-            "not in the Fourier lens's; refocus the camera onto the MLA's focus (the rims sharpest), or expect "
-            "blurred views: the sign of the defocus needs a frame of objects at known depths"
+            f"{_blurred_rims(float(np.median(self.defocus_waves)))}; refocus the camera onto the MLA's focus (the rims "
+            "sharpest), or expect blurred views: the sign of the defocus needs a frame of objects at known depths"
         )
 
     def report(self) -> list[str]:
@@ -101,18 +105,96 @@ class FocusFit:
         ]
 
 
-def _rims(white, cal):
-    """For each lenslet wholly inside the pupil and on the frame: its index, window origin and the
-    rim pixels no neighbouring EI lights (a boolean mask on the window)."""
+def _blurred_rims(d: float) -> str:
+    return (
+        f"the elemental images' rims are blurred as by a defocus of {d:.2f} waves at each sub-aperture's edge "
+        "(an in-focus instrument reads under 0.1): the camera is not in the lenslets' focal plane, or the MLA "
+        "not in the Fourier lens's"
+    )
+
+
+def rims_notice(d: float, name: str = "the white frame") -> str:
+    """One line for every frame reconstructed with views this far out of focus and optics that do not
+    model it: what it does to the numbers and the fix, `ssdpc fit-optics`.
+
+    Parameters
+    ----------
+    d : float
+        The views' defocus the rims show (:func:`rim_defocus`), waves at the sub-aperture's edge.
+    name : str
+        The frame the rims were measured on.
+
+    Returns
+    -------
+    str
+    """
+    return (
+        f"{name}: {_blurred_rims(d)}, and the optics in use do not model it (two beads read 0.3 x their Δn "
+        "through such views, docs/validation.md): refocus the camera onto the lenslets' focus and recalibrate, or "
+        "fit the views' focus and the pupil to a frame of beads with `ssdpc fit-optics BEADS.tif --calibration "
+        "CAL --flat FLAT --white WHITE -o FITTED.json`"
+    )
+
+
+def rims_unmodelled(d: float | None, optics: Optics) -> bool:
+    """Whether views this far out of focus (:func:`rim_defocus`; None: not measured) are beyond an
+    in-focus instrument's (:data:`BLURRED_WAVES`) while ``optics`` give no lenslet a defocus.
+
+    Parameters
+    ----------
+    d : float or None
+        Waves at the sub-aperture's edge.
+    optics : Optics
+
+    Returns
+    -------
+    bool
+    """
+    modelled = any(t.defocus_waves != 0 for t in optics.aberrations.lenslets)
+    return d is not None and d > BLURRED_WAVES and not modelled
+
+
+def rim_defocus(white, cal, optics: Optics) -> float | None:
+    """A quick look at the views' focus on a white frame: the median |d_k| of the views nearest the
+    optical axis (:data:`QUICK_LENSLETS`, :data:`QUICK_DEFOCUS`); beyond :data:`BLURRED_WAVES` the
+    views are out of focus.
+
+    Parameters
+    ----------
+    white : ndarray, (H, W)
+        The white frame, camera units.
+    cal : Calibration
+        Its calibration.
+    optics : Optics
+
+    Returns
+    -------
+    float or None
+        Waves at the sub-aperture's edge; None where no rim is free of its neighbours' light.
+    """
+    try:
+        fit = fit_view_focus(white, cal, optics, most_central=QUICK_LENSLETS, defocus_waves=QUICK_DEFOCUS)
+    except SsdpcError:
+        return None
+    return round(float(np.median(fit.defocus_waves)), 3)
+
+
+def _rims(white, cal, most_central: int | None = None):
+    """For each lenslet wholly inside the pupil and on the frame (the ``most_central`` nearest the
+    optical axis, or all): its index, window origin and the rim pixels no neighbouring EI lights (a
+    boolean mask on the window)."""
     img = np.asarray(white, float)
     r_ei = float(cal.ei_radius_px)
     half = int(np.ceil(r_ei + OUTSIDE_PX + 2))
     centres = np.asarray(cal.centres_px, float)
+    inside = [i for i, ln in enumerate(cal.lenslets) if ln.fraction >= 0.999]
+    if most_central is not None:
+        inside.sort(key=lambda i: float(np.hypot(*(centres[i] - np.asarray(cal.grid.axis_px, float)))))
     out = []
-    for i, ln in enumerate(cal.lenslets):
+    for i in inside:
         cx, cy = centres[i]
         x0, y0 = int(round(cx)) - half, int(round(cy)) - half
-        if ln.fraction < 0.999 or x0 < 0 or y0 < 0 or x0 + 2 * half >= img.shape[1] or y0 + 2 * half >= img.shape[0]:
+        if x0 < 0 or y0 < 0 or x0 + 2 * half >= img.shape[1] or y0 + 2 * half >= img.shape[0]:
             continue
         yy, xx = np.mgrid[y0 : y0 + 2 * half + 1, x0 : x0 + 2 * half + 1]
         r = np.hypot(xx - cx, yy - cy)
@@ -121,12 +203,15 @@ def _rims(white, cal):
         mask = (r > r_ei - INSIDE_PX) & (r < r_ei + OUTSIDE_PX) & (nearest > r_ei + OUTSIDE_PX + 2)
         if mask.sum() > 50:
             out.append((i, (x0, y0), mask, img[y0 : y0 + 2 * half + 1, x0 : x0 + 2 * half + 1]))
+            if most_central is not None and len(out) == most_central:
+                break
     return out
 
 
-def _disks(rims, cal) -> list:
-    """Per rim, the stop's disk at each radius tried and the same disk falling off towards its rim
-    (Köhler illumination's fall-off), on the rim's window: [(disk, disk r²/R²) per radius]."""
+def _disks(rims, cal, shape) -> list:
+    """Per rim, the spectra (rfft2 on ``shape``) of the stop's disk at each radius tried and of the
+    same disk falling off towards its rim (Köhler illumination's fall-off): [(disk, disk r²/R²) per
+    radius]."""
     centres, r_ei = np.asarray(cal.centres_px, float), float(cal.ei_radius_px)
     out = []
     for i, (x0, y0), _, data in rims:
@@ -134,26 +219,33 @@ def _disks(rims, cal) -> list:
         dx, dy = xx + x0 - centres[i, 0], yy + y0 - centres[i, 1]
         r2 = (dx * dx + dy * dy) / r_ei**2
         disks = [disk_fraction(dx, dy, r_ei + step, 1.0) for step in RADIUS_STEPS_PX]
-        out.append([(disk, disk * r2) for disk in disks])
+        out.append([(cpu().rfft2(disk, s=shape), cpu().rfft2(disk * r2, s=shape)) for disk in disks])
     return out
 
 
-def _misfits(rims, cal, optics: Optics, progress=None) -> np.ndarray:
-    """The rims' least misfit (over radius, scale, fall-off and background) for every defocus, (K, D)."""
+def _misfits(rims, cal, optics: Optics, defocus_waves, progress=None) -> np.ndarray:
+    """The rims' least misfit (over radius, scale, fall-off and background) for every defocus, (K, D).
+
+    Each model is the disk convolved with the view's PSF (its 'same' part: the kernel's centre on
+    the window's pixel); the disks' spectra are computed once for every defocus."""
     lenslets = [cal.lenslets[i] for i, *_ in rims]
-    disks = _disks(rims, cal)  # the same for every defocus
-    out = np.zeros((len(rims), len(DEFOCUS_WAVES)))
-    for j, d in enumerate(DEFOCUS_WAVES):
+    n = rims[0][3].shape[0]
+    shape = (sfft.next_fast_len(n + KERNEL_PX - 1, real=True),) * 2
+    disks = _disks(rims, cal, shape)  # the same for every defocus
+    c = KERNEL_PX // 2
+    out = np.zeros((len(rims), len(defocus_waves)))
+    for j, d in enumerate(defocus_waves):
         terms = tuple(LensletTerms(row=ln.row, col=ln.col, defocus_waves=float(d)) for ln in lenslets)
         # the path behind the field stop: the lenslets alone (the objective's phase leaves the stop's image)
         behind = {"lenslets": terms, "objective_zernike_waves": ()}
         blurred = optics.replace(aberrations=optics.aberrations.model_copy(update=behind).to_dict())
-        kernels = LensletPSF(blurred, lenslets, shape=(41, 41), support_px=41).kernels(0.0)
+        kernels = LensletPSF(blurred, lenslets, shape=(KERNEL_PX,) * 2, support_px=KERNEL_PX).kernels(0.0)
         for k, (_, _, mask, data) in enumerate(rims):
+            kernel = cpu().rfft2(kernels[k], s=shape)
             best = np.inf
-            for disk, fall in disks[k]:
+            for spectra in disks[k]:
                 a = np.stack(
-                    [signal.fftconvolve(b, kernels[k], mode="same")[mask] for b in (disk, fall)]
+                    [cpu().irfft2(spec * kernel, s=shape)[c : c + n, c : c + n][mask] for spec in spectra]
                     + [np.ones(int(mask.sum()))],
                     axis=1,
                 )
@@ -161,11 +253,13 @@ def _misfits(rims, cal, optics: Optics, progress=None) -> np.ndarray:
                 best = min(best, float(np.sum((a @ coef - data[mask]) ** 2)))
             out[k, j] = best
         if progress is not None:
-            progress(j + 1, len(DEFOCUS_WAVES))
+            progress(j + 1, len(defocus_waves))
     return out
 
 
-def fit_view_focus(white, cal, optics: Optics, progress=None) -> FocusFit:
+def fit_view_focus(
+    white, cal, optics: Optics, progress=None, *, most_central: int | None = None, defocus_waves=DEFOCUS_WAVES
+) -> FocusFit:
     """Fit each view's defocus to the rims of the white frame's elemental images.
 
     Parameters
@@ -179,6 +273,11 @@ def fit_view_focus(white, cal, optics: Optics, progress=None) -> FocusFit:
         aberrations act before the stop and are left out of the model).
     progress : callable, optional
         ``progress(done, total)`` per defocus value.
+    most_central : int, optional
+        Fit only this many lenslets, those nearest the optical axis (a quick look:
+        :func:`rims_blurred`); all by default.
+    defocus_waves : ndarray, (D,)
+        The defocus values the rims are compared with, evenly spaced from 0, waves.
 
     Returns
     -------
@@ -189,24 +288,25 @@ def fit_view_focus(white, cal, optics: Optics, progress=None) -> FocusFit:
     SsdpcError
         No elemental image whose rim is free of its neighbours' light.
     """
-    rims = _rims(cal.check_frame(white, "white frame"), cal)
+    rims = _rims(cal.check_frame(white, "white frame"), cal, most_central)
     if not rims:
         raise SsdpcError(
             "no elemental image of the white frame has a rim free of its neighbours' light; check the calibration "
             "(its EI radius) and that the frame is a white frame"
         )
-    misfit = _misfits(rims, cal, optics, progress)
+    defocus_waves = np.asarray(defocus_waves, float)
+    misfit = _misfits(rims, cal, optics, defocus_waves, progress)
     n = np.array([mask.sum() for _, _, mask, _ in rims], float)
     level = np.array([np.percentile(data[mask], 95) for _, _, mask, data in rims])
     best = np.argmin(misfit, axis=1)
     d, sigma = np.empty(len(rims)), np.empty(len(rims))
-    step = float(DEFOCUS_WAVES[1] - DEFOCUS_WAVES[0])
+    step = float(defocus_waves[1] - defocus_waves[0])
     for k, j in enumerate(best):
-        j = int(np.clip(j, 1, len(DEFOCUS_WAVES) - 2))
+        j = int(np.clip(j, 1, len(defocus_waves) - 2))
         y0, y1, y2 = misfit[k, j - 1 : j + 2]
         curv = (y0 - 2 * y1 + y2) / step**2
         shift = 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2) if curv > 0 else 0.0
-        d[k] = max(float(DEFOCUS_WAVES[j] + np.clip(shift, -1, 1) * step), 0.0)
+        d[k] = max(float(defocus_waves[j] + np.clip(shift, -1, 1) * step), 0.0)
         noise = misfit[k, best[k]] / max(n[k] - 5, 1)
         sigma[k] = np.sqrt(2 * noise / curv) if curv > 0 else np.inf
     rms = lambda col: float(np.sqrt(np.mean(col / n) / np.mean(level**2)))

@@ -81,6 +81,8 @@ def cmd_calibrate(args):
         f"rotation {g.rotation_deg:+.3f} deg, {len(cal.lenslets)} lenslets"
     )
     print(cal.optics.aberrations.summary())
+    if cal.rim_defocus_waves is not None:
+        print(f"views' focus from the EI rims: |d| {cal.rim_defocus_waves:.2f} waves at the sub-aperture's edge")
     print(f"wrote {out} and {png}")
 
 

@@ -100,8 +100,11 @@ class ViewContrast:
         fv = None
         #: The condenser NA the flat's lenslets look lit at (None without a flat).
         self.condenser_na_seen: float | None = None
+        #: Every lenslet's light on the flat, (K,), camera units (None without a flat).
+        self.flat_levels: np.ndarray | None = None
         if flat is not None:  # without a flat, each lenslet's direct light comes from the transfer model
             levels, noise, fv = self._measure(flat, "flat frame")
+            self.flat_levels = levels
             self.condenser_na_seen = checks.check_flat(levels, noise, optics, lenslets=cal.lenslets)
             fv = np.clip(fv, 0, None)
         self.level = level = self._direct_light(fv)

@@ -166,6 +166,7 @@ class CalibrateWidget(StepWidget):
             f"pitch {g.pitch_px:.3f} px · rotation {g.rotation_deg:+.3f}°\n"
             f"{len(cal.lenslets)} lenslets · lattice rms {cal.residual_px:.3f} px · {cal.kind} frame\n"
             f"{cal.optics.aberrations.summary()}"
+            + ("" if cal.rim_defocus_waves is None else f"\nviews' focus (rims): |d| {cal.rim_defocus_waves:.2f} waves")
         )
         return f"calibrated on '{source}'"
 
