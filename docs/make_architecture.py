@@ -44,7 +44,7 @@ STEPS = [
     ("frame source", "pipeline.sources (StoredFrames, LiveFrames)"),
     ("checked views (K, h, w), once", "Measurements: contrast.ViewContrast"),
     ("phase per slab (Z, y, x)", "reconstruction.methods: tv | wotf | rl | multislice"),
-    ("Δn, RI volume, checked", "reconstructor.Result, checks.check_result"),
+    ("Δn, RI volume, checked", "frame_result.Result, checks.check_result"),
     ("sink", "pipeline.sinks: memory | OME-TIFF | OME-Zarr"),
 ]
 

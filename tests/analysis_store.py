@@ -9,7 +9,7 @@ from scipy import ndimage
 from napari_ssdpc._version import SOFTWARE
 from napari_ssdpc.analysis.objects import DEFAULT_RULE, FWHM_PER_SIGMA
 from napari_ssdpc.pipeline.sinks import OutputGrid, ZarrSink
-from napari_ssdpc.reconstruction.reconstructor import Result
+from napari_ssdpc.reconstruction.frame_result import Result
 from napari_ssdpc.settings.config import RunConfig
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation import moving

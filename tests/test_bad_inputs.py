@@ -26,7 +26,8 @@ from napari_ssdpc.pipeline import sinks
 from napari_ssdpc.pipeline.job import Job
 from napari_ssdpc.pipeline.run import Pipeline
 from napari_ssdpc.reconstruction.checks import OPTICS_FIELDS
-from napari_ssdpc.reconstruction.reconstructor import Reconstructor, z_grid
+from napari_ssdpc.reconstruction.frame_result import z_grid
+from napari_ssdpc.reconstruction.reconstructor import Reconstructor
 from napari_ssdpc.settings.config import RunConfig
 from napari_ssdpc.settings.optics import Optics
 

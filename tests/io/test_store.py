@@ -24,7 +24,7 @@ from napari_ssdpc.pipeline.job import Job
 from napari_ssdpc.pipeline.run import Pipeline
 from napari_ssdpc.pipeline.sinks import ZarrSink
 from napari_ssdpc.reconstruction.checks import check_result
-from napari_ssdpc.reconstruction.reconstructor import Result
+from napari_ssdpc.reconstruction.frame_result import Result
 from napari_ssdpc.settings.config import RunConfig
 
 

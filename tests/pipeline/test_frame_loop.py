@@ -12,8 +12,8 @@ from napari_ssdpc.pipeline.job import Job
 from napari_ssdpc.pipeline.run import Pipeline
 from napari_ssdpc.pipeline.sinks import MemorySink, OmeTiffSink, ZarrSink
 from napari_ssdpc.pipeline.sources import FrameSource, LiveFrames, as_source
+from napari_ssdpc.reconstruction.frame_result import Result
 from napari_ssdpc.reconstruction.methods.base import Solution
-from napari_ssdpc.reconstruction.reconstructor import Result
 from napari_ssdpc.settings.config import RunConfig
 
 

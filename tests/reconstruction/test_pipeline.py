@@ -9,7 +9,8 @@ import tifffile
 
 from napari_ssdpc.cli.main import main
 from napari_ssdpc.errors import Cancelled, SsdpcError, SsdpcWarning
-from napari_ssdpc.reconstruction.reconstructor import Reconstructor, z_grid
+from napari_ssdpc.reconstruction.frame_result import z_grid
+from napari_ssdpc.reconstruction.reconstructor import Reconstructor
 from napari_ssdpc.simulation import phantoms
 from napari_ssdpc.validation import metrics as an
 from napari_ssdpc.validation.cases import run_config, simulate_case

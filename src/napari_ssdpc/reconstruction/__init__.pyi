@@ -1,10 +1,11 @@
 from .bead import Bead
 from .beads import fit_beads, measure_beads
 from .condenser_fit import CondenserFit, fit_condenser
+from .frame_result import Result
 from .methods import METHODS, method_class
 from .methods.base import PhaseMethod, Setup, Solution
 from .optics_fit import OpticsFit, fit_optics
-from .reconstructor import Reconstructor, Result
+from .reconstructor import Reconstructor
 from .regularised import TvInversion
 from .tv_report import TvReport
 from .wotf import WotfInversion

@@ -33,7 +33,7 @@ from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solutio
 from napari_ssdpc.reconstruction.stacks import DirectionalStacks
 from napari_ssdpc.settings.config import RunConfig
 
-__all__ = ["Reconstructor", "Result", "z_grid"]  # Result and z_grid live in .frame_result
+__all__ = ["Reconstructor"]
 
 
 class Reconstructor:

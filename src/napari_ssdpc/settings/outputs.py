@@ -3,7 +3,7 @@
 A quantity has a name (the key of ``--save``, of the OME-Zarr image group and of the file
 suffix), a unit, a description, a colormap and contrast rule for display, its kind (a (z, y, x)
 volume, a (y, x) map, or channels of volumes) and how to take it from a
-:class:`~napari_ssdpc.reconstruction.reconstructor.Result`. A new quantity is added here, once;
+:class:`~napari_ssdpc.reconstruction.frame_result.Result`. A new quantity is added here, once;
 every writer, reader and widget uses this one table. :class:`OutputSettings` is the
 ``outputs:`` section of a run configuration.
 """
