@@ -8,7 +8,10 @@ The paper's optics in water (n 1.33) at condenser NA 0.25, camera noise, the gri
 (3.7, −2.2) px and rotated by 0.4°; the default method `tv`, z −30..30 µm. Records each bead's
 integrated Δn near it against the truth and the depth of its Δn-weighted centroid, the fitted terms
 and the fit's time. Writes docs/pupil_fit_validation.json (with ``--condenser``, the condenser also
-at NA 0.26 and 0.01 NA off axis: docs/pupil_fit_validation-condenser.json) and prints a Markdown table.
+at NA 0.26 and 0.01 NA off axis: docs/pupil_fit_validation-condenser.json; with ``--only KIND``, one
+imperfection alone: ``sph`` the spherical aberration, ``def`` the views' defocus, ``cond`` the condenser,
+``lens`` the lenslets' centres and focal lengths off by up to 1 %: docs/pupil_fit_validation-KIND.json)
+and prints a Markdown table.
 
     python docs/pupil_fit_validation.py --cache /tmp/cases
 """
@@ -20,6 +23,8 @@ import dataclasses
 import json
 import time
 from pathlib import Path
+
+import numpy as np
 
 from napari_ssdpc.calibration import calibrate
 from napari_ssdpc.calibration.result import Calibration
@@ -38,6 +43,39 @@ SPHERICAL, DEFOCUS = 0.224, 0.5
 BEADS = (ph.Sphere((-20.0, 5.0, -10.0), 6.0, MEDIUM + 0.03), ph.Sphere((20.0, -5.0, 15.0), 6.0, MEDIUM + 0.03))
 
 
+def _lenslets(nominal, lenslets):
+    """Each lenslet's sub-aperture off its place by up to 1 % of the pitch (5 µm) and its focal length
+    off by up to 1 % (±0.04 waves of defocus at its edge), drawn once (seed 7)."""
+    rng = np.random.default_rng(7)
+    terms = tuple(
+        LensletTerms(
+            row=ln.row,
+            col=ln.col,
+            offset_um=tuple(float(v) for v in rng.uniform(-5, 5, 2)),
+            defocus_waves=float(rng.uniform(-0.04, 0.04)),
+        )
+        for ln in lenslets
+    )
+    return nominal.replace(aberrations=Aberrations(lenslets=terms))
+
+
+#: One imperfection alone (``--only``): the optics of the instrument that recorded the frames.
+ALONE = {
+    "sph": lambda nominal, _: nominal.replace(
+        aberrations=Aberrations(objective_zernike_waves=(0.0,) * 10 + (SPHERICAL,))
+    ),
+    "def": lambda nominal, lenslets: nominal.replace(
+        aberrations=Aberrations(
+            lenslets=tuple(LensletTerms(row=ln.row, col=ln.col, defocus_waves=DEFOCUS) for ln in lenslets)
+        )
+    ),
+    "cond": lambda nominal, _: nominal.replace(
+        condenser_na=0.26, aberrations=Aberrations(condenser_offset_na=(0.01, 0.0))
+    ),
+    "lens": _lenslets,
+}
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--cache", default=None, help="folder for the simulated frames")
@@ -45,15 +83,18 @@ def main():
     p.add_argument(
         "--condenser", action="store_true", help="the condenser also at NA 0.26 and 0.01 NA off axis (optics: 0.25)"
     )
+    p.add_argument("--only", choices=sorted(ALONE), help="one imperfection alone instead")
     args = p.parse_args()
     nominal = val.paper_optics(0.25).replace(medium_index=MEDIUM)
-    terms = tuple(
-        LensletTerms(row=ln.row, col=ln.col, defocus_waves=DEFOCUS) for ln in Grid.nominal(nominal).lenslets(nominal)
-    )
-    offset = (0.01, 0.0) if args.condenser else (0.0, 0.0)
-    ab = Aberrations(objective_zernike_waves=(0.0,) * 10 + (SPHERICAL,), lenslets=terms, condenser_offset_na=offset)
-    truth = nominal.replace(aberrations=ab, condenser_na=0.26 if args.condenser else 0.25)
-    name = "pf-two-condenser" if args.condenser else "pf-two"
+    lenslets = Grid.nominal(nominal).lenslets(nominal)
+    if args.only:
+        truth, name = ALONE[args.only](nominal, lenslets), f"pf1-{args.only}"
+    else:
+        terms = tuple(LensletTerms(row=ln.row, col=ln.col, defocus_waves=DEFOCUS) for ln in lenslets)
+        offset = (0.01, 0.0) if args.condenser else (0.0, 0.0)
+        ab = Aberrations(objective_zernike_waves=(0.0,) * 10 + (SPHERICAL,), lenslets=terms, condenser_offset_na=offset)
+        truth = nominal.replace(aberrations=ab, condenser_na=0.26 if args.condenser else 0.25)
+        name = "pf-two-condenser" if args.condenser else "pf-two"
     case = val.simulate_case(name, ph.Spheres(BEADS, medium_index=MEDIUM), truth, cache_dir=args.cache, source_step=4)
     cal = calibrate(case.white, nominal)
     seconds = None
@@ -78,7 +119,7 @@ def main():
         row = {"optics": how, "masses": m["masses"], "centroids_z_um": m["centroids_z_um"], "false": m["false"]}
         out["rows"].append(row)
         print(json.dumps(row, default=float), flush=True)
-    (HERE / f"{name.replace('pf-two', 'pupil_fit_validation')}.json").write_text(
+    (HERE / f"{name.replace('pf-two', 'pupil_fit_validation').replace('pf1', 'pupil_fit_validation')}.json").write_text(
         json.dumps(out, indent=1, default=float)
     )
     print("\n| optics | integrated Δn / true (z −10, +15 µm) | centroid depth error (µm) | false Δn |")

@@ -25,6 +25,10 @@ from napari_ssdpc._napari.notify import gui_words
         ),
         ("Check --dz and --alpha", "Check dz (Method tab) and the Tikhonov α (Reconstruct tab)"),
         ("raise tv.warm_iterations (--tv-warm-iterations)", "raise tv.warm_iterations (in the run configuration)"),
+        (
+            "check the optics (`ssdpc fit-optics` fits them to a frame of beads)",
+            "check the optics (Fit the optics in the Calibrate tab fits them to a frame of beads)",
+        ),
     ],
 )
 def test_flags_become_the_dock_s_words(core, dock):

@@ -19,6 +19,7 @@ _GUI_WORDS = (
         r"with `ssdpc fit-optics BEADS\.tif --calibration CAL --flat FLAT --white WHITE -o FITTED\.json`",
         "with Fit the optics (Calibrate tab: the bead frame, the flat and the white frame)",
     ),
+    (r"`ssdpc fit-optics`", "Fit the optics in the Calibrate tab"),
     (r"--calibration\b", "the calibration (Method tab)"),
     (r"--flat\b", "the flat frame (Reconstruct tab)"),
     (r"reconstruct with --method (\w+)", r"choose the phase method '\1' (Method tab)"),

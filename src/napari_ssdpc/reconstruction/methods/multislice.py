@@ -323,8 +323,8 @@ class MultisliceMethod(PhaseMethod):
             )
             warnings.warn(
                 f"the multislice model does not explain the views over {len(unexplained)} object(s), their Δn is "
-                f"not to be trusted [{where} the noise; the fit stops at {stop:.1f}]: check the optics and the "
-                "calibration, or raise the multislice iterations",
+                f"not to be trusted [{where} the noise; the fit stops at {stop:.1f}]: check the optics (`ssdpc "
+                "fit-optics` fits them to a frame of beads) and the calibration, or raise the multislice iterations",
                 SsdpcWarning,
                 stacklevel=2,
             )
