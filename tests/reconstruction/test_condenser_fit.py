@@ -9,6 +9,7 @@ from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics.lattice import Grid
 from napari_ssdpc.reconstruction.condenser_fit import fit_condenser
 from napari_ssdpc.reconstruction.contrast import ViewContrast
+from napari_ssdpc.reconstruction.instrument_notices import condenser_notice
 from napari_ssdpc.settings.aberrations import Aberrations
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.simulation.multislice import Source
@@ -78,3 +79,23 @@ def test_light_the_condenser_does_not_explain_is_reported(instrument):
     levels = levels * (1 + 0.1 * np.random.default_rng(6).standard_normal(len(levels)))
     fit = fit_condenser(levels, cal.lenslets, NOMINAL)
     assert fit.unexplained and "transmit unequally" in fit.report()[-1]
+
+
+@pytest.mark.parametrize(
+    "offset, uneven, said",
+    [((0.01, -0.005), 0.0, True), ((0.0, 0.0), 0.03, False), ((0.004, 0.0), 0.0, False)],
+    ids=["off-axis", "centred-lenslets-uneven", "within-tolerance"],
+)
+def test_a_condenser_off_axis_is_said(instrument, offset, uneven, said):
+    """A flat lit by a condenser 0.011 NA off axis is said (naming fit-optics and the centre); a
+    centred one is not, also with lenslets that transmit 3 % unevenly (their centre read within
+    0.0011), nor one 0.004 off; optics that put the condenser where it is say nothing."""
+    grid, cal, views = instrument
+    truth = NOMINAL.replace(aberrations=Aberrations(condenser_offset_na=offset))
+    levels, _ = views.lenslet_levels(flat_frame(truth, grid=grid, rng=2, source=Source(step=4)))
+    levels = levels * (1 + uneven * np.random.default_rng(5).standard_normal(len(levels)))
+    note = condenser_notice(levels, cal.lenslets, NOMINAL)
+    assert (note is not None) == said
+    if said:
+        assert "ssdpc fit-optics" in note and "(+0.010, -0.005) NA" in note and "\n" not in note
+        assert condenser_notice(levels, cal.lenslets, truth) is None

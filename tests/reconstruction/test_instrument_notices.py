@@ -1,25 +1,16 @@
 """Signs on the white and flat frames of an instrument unlike its optics are said on every frame and
-name `ssdpc fit-optics` (docs/aberrations.md)."""
+name `ssdpc fit-optics` (docs/aberrations.md); the condenser's notice is tested beside its fit
+(test_condenser_fit.py)."""
 
 import dataclasses
 import warnings
 
-import numpy as np
 import pytest
 
-from napari_ssdpc.calibration import calibrate
 from napari_ssdpc.errors import SsdpcWarning
-from napari_ssdpc.physics.lattice import Grid
-from napari_ssdpc.reconstruction.contrast import ViewContrast
-from napari_ssdpc.reconstruction.instrument_notices import condenser_notice
 from napari_ssdpc.reconstruction.reconstructor import Reconstructor
 from napari_ssdpc.settings.aberrations import Aberrations, LensletTerms
 from napari_ssdpc.settings.config import RunConfig
-from napari_ssdpc.settings.optics import Optics
-from napari_ssdpc.simulation.multislice import Source
-from napari_ssdpc.simulation.sample_free import flat_frame, white_frame
-
-NOMINAL = Optics.paper().replace(condenser_na=0.25)
 
 
 def _notices(rec, frames) -> list[str]:
@@ -47,30 +38,3 @@ def test_views_out_of_focus_are_said_on_every_frame(synthetic_series):
     fitted = dataclasses.replace(blurred, optics=cal.optics.replace(aberrations=Aberrations(lenslets=terms)))
     assert Reconstructor(config, fitted, flat=flat).notices == []
     assert Reconstructor(config, cal, flat=flat).notices == []  # rims in focus (measured 0.09 waves)
-
-
-@pytest.fixture(scope="module")
-def instrument():
-    grid = Grid.nominal(NOMINAL, axis_offset_px=(2.3, -1.4), rotation_deg=0.3)
-    cal = calibrate(white_frame(NOMINAL, grid=grid, rng=1), NOMINAL)
-    return grid, cal, ViewContrast(NOMINAL, cal)
-
-
-@pytest.mark.parametrize(
-    "offset, uneven, said",
-    [((0.01, -0.005), 0.0, True), ((0.0, 0.0), 0.03, False), ((0.004, 0.0), 0.0, False)],
-    ids=["off-axis", "centred-lenslets-uneven", "within-tolerance"],
-)
-def test_a_condenser_off_axis_is_said(instrument, offset, uneven, said):
-    """A flat lit by a condenser 0.011 NA off axis is said (naming fit-optics and the centre); a
-    centred one is not, also with lenslets that transmit 3 % unevenly (their centre read within
-    0.0011), nor one 0.004 off; optics that put the condenser where it is say nothing."""
-    grid, cal, views = instrument
-    truth = NOMINAL.replace(aberrations=Aberrations(condenser_offset_na=offset))
-    levels, _ = views.lenslet_levels(flat_frame(truth, grid=grid, rng=2, source=Source(step=4)))
-    levels = levels * (1 + uneven * np.random.default_rng(5).standard_normal(len(levels)))
-    note = condenser_notice(levels, cal.lenslets, NOMINAL)
-    assert (note is not None) == said
-    if said:
-        assert "ssdpc fit-optics" in note and "(+0.010, -0.005) NA" in note and "\n" not in note
-        assert condenser_notice(levels, cal.lenslets, truth) is None
