@@ -136,13 +136,13 @@ def rims_notice(d: float, name: str = "the white frame") -> str:
     )
 
 
-def rims_unmodelled(d: float | None, optics: Optics) -> bool:
-    """Whether views this far out of focus (:func:`rim_defocus`; None: not measured) are beyond an
-    in-focus instrument's (:data:`BLURRED_WAVES`) while ``optics`` give no lenslet a defocus.
+def rims_unmodelled(d: float, optics: Optics) -> bool:
+    """Whether views this far out of focus (:func:`rim_defocus`) are beyond an in-focus instrument's
+    (:data:`BLURRED_WAVES`) while ``optics`` give no lenslet a defocus.
 
     Parameters
     ----------
-    d : float or None
+    d : float
         Waves at the sub-aperture's edge.
     optics : Optics
 
@@ -150,8 +150,7 @@ def rims_unmodelled(d: float | None, optics: Optics) -> bool:
     -------
     bool
     """
-    modelled = any(t.defocus_waves != 0 for t in optics.aberrations.lenslets)
-    return d is not None and d > BLURRED_WAVES and not modelled
+    return d > BLURRED_WAVES and not any(t.defocus_waves != 0 for t in optics.aberrations.lenslets)
 
 
 def rim_defocus(white, cal, optics: Optics) -> float | None:
@@ -275,7 +274,7 @@ def fit_view_focus(
         ``progress(done, total)`` per defocus value.
     most_central : int, optional
         Fit only this many lenslets, those nearest the optical axis (a quick look:
-        :func:`rims_blurred`); all by default.
+        :func:`rim_defocus`); all by default.
     defocus_waves : ndarray, (D,)
         The defocus values the rims are compared with, evenly spaced from 0, waves.
 
