@@ -12,7 +12,7 @@ import pytest
 
 pytest.importorskip("napari")
 
-from napari_ssdpc._napari import sample_data
+from napari_ssdpc._napari import sample_cache, sample_data
 from napari_ssdpc._napari.widgets import jobs
 
 
@@ -23,19 +23,19 @@ def test_the_series_simulation_stops_within_a_source_point_at_exit(monkeypatch):
         started.set()
         while True:
             time.sleep(0.01)
-            sample_data._unless_exiting(0, 1)
+            sample_cache.unless_exiting(0, 1)
 
     monkeypatch.setattr(sample_data, "series_frame", slow_frame)
-    monkeypatch.setattr(sample_data, "_BACKGROUND", [])
+    monkeypatch.setattr(sample_cache, "BACKGROUND", [])
     prefetch = sample_data.SeriesPrefetch(3)
     assert started.wait(5.0)
     try:
         t0 = time.perf_counter()
-        sample_data._stop_background()  # what atexit runs
+        sample_cache.stop_background()  # what atexit runs
         assert not prefetch.thread.is_alive() and time.perf_counter() - t0 < 1.0
         assert prefetch.made == set()  # nothing cached from a cut simulation
     finally:
-        sample_data.EXITING.clear()
+        sample_cache.EXITING.clear()
 
 
 def test_a_running_job_is_stopped_and_joined_at_exit():

@@ -9,6 +9,7 @@ import pytest
 import tifffile
 
 from napari_ssdpc._napari import reader as _reader
+from napari_ssdpc._napari import sample_cache as _sample_cache
 from napari_ssdpc._napari import sample_data as _sample_data
 from napari_ssdpc._napari import writer as _writer
 from napari_ssdpc.calibration import calibrate
@@ -250,7 +251,7 @@ def test_a_cached_frame_is_made_once_when_two_threads_ask(tmp_path, monkeypatch)
         return np.full((3, 5), 7, np.uint16)
 
     out = []
-    threads = [threading.Thread(target=lambda: out.append(_sample_data._cached("f", make, "k"))) for _ in range(3)]
+    threads = [threading.Thread(target=lambda: out.append(_sample_cache.cached("f", make, "k"))) for _ in range(3)]
     for t in threads:
         t.start()
     for t in threads:
@@ -322,10 +323,10 @@ def test_cache_drops_unfinished_files_left_by_an_exit(tmp_path, monkeypatch):
     import os
 
     monkeypatch.setenv("NAPARI_SSDPC_CACHE", str(tmp_path))
-    folder = _sample_data.cache_dir()
+    folder = _sample_cache.cache_dir()
     old, fresh = folder / ".moving_20_004-x.tif.1.a.part", folder / ".moving_20_005-x.tif.1.b.part"
     old.write_bytes(b"half")
     fresh.write_bytes(b"being written")
     os.utime(old, (1e9, 1e9))
-    _sample_data.cache_dir()
+    _sample_cache.cache_dir()
     assert not old.exists() and fresh.exists()

@@ -22,95 +22,21 @@ reads a stale file.
 
 from __future__ import annotations
 
-import atexit
-import contextlib
-import hashlib
-import json
-import os
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
 
 from napari_ssdpc import __version__
+from napari_ssdpc._napari import sample_cache
 from napari_ssdpc._napari.placement import fit_view, frame_transform
 
 #: Sample frames shipped with the package (``ship_frames``): the samples open at once.
-SHIPPED = Path(__file__).parent / "data"
 #: The bead sample's camera region of interest (px): the whole objective pupil (radius 435 px) fits.
 BEAD_ROI_PX = 1024
 SERIES_FRAMES = 20
 SOURCE = "napari-ssdpc simulator"  # the samples' frames say where they come from
-STALE_PART_S = 600.0  # an unfinished cache file older than this was left by an exit
 SERIES_SOURCE_STEP = 4  # reduced-cost source sampling of the time series (see module doc)
-
-
-def cache_dir() -> Path:
-    """Where simulated sample frames are cached: ``$NAPARI_SSDPC_CACHE``/version (default ~/.cache/napari-ssdpc).
-
-    Returns
-    -------
-    Path
-    """
-    root = os.environ.get("NAPARI_SSDPC_CACHE") or Path.home() / ".cache" / "napari-ssdpc"
-    path = Path(root) / __version__
-    path.mkdir(parents=True, exist_ok=True)
-    for part in path.glob(".*.part"):  # a write that napari's exit cut short (background thread)
-        with contextlib.suppress(OSError):
-            if time.time() - part.stat().st_mtime > STALE_PART_S:
-                part.unlink()
-    return path
-
-
-def _key(*parts) -> str:
-    text = json.dumps(parts, sort_keys=True, default=repr)
-    return hashlib.sha1(text.encode()).hexdigest()[:10]
-
-
-#: Set when the interpreter exits: a background simulation stops within one source point (left
-#: running, it was torn down inside an FFT and napari's exit aborted: "terminate called ...").
-EXITING = threading.Event()
-_BACKGROUND: list[threading.Thread] = []
-
-
-@atexit.register
-def _stop_background() -> None:
-    EXITING.set()
-    for thread in _BACKGROUND:
-        thread.join(timeout=30.0)
-
-
-def _unless_exiting(done, total) -> None:
-    """A simulation's progress callback that ends it when the interpreter exits."""
-    if EXITING.is_set():
-        from napari_ssdpc.errors import Cancelled
-
-        raise Cancelled("napari is closing")
-
-
-_LOCKS: dict[Path, threading.Lock] = {}
-_LOCKS_GUARD = threading.Lock()
-
-
-def _file_lock(path: Path) -> threading.Lock:
-    """One lock per cache file: two threads asking for one frame simulate it once."""
-    with _LOCKS_GUARD:
-        return _LOCKS.setdefault(path, threading.Lock())
-
-
-def _cached(name: str, make, key: str = "") -> np.ndarray:
-    """Read ``name`` from the cache, or make it and write it there (atomically)."""
-    from napari_ssdpc.io.frames import read_frame, write_tiff
-
-    path = cache_dir() / (f"{name}-{key}.tif" if key else f"{name}.tif")
-    with _file_lock(path):
-        for known in (SHIPPED / path.name, path):  # shipped with the package, else made here before
-            if known.is_file():
-                return read_frame(known, allow_series=False, name="sample frame")
-        data = make()
-        write_tiff(path, data, photometric="minisblack")
-    return data
 
 
 def _physics(optics) -> dict:
@@ -120,7 +46,7 @@ def _physics(optics) -> dict:
 
 def _optics_meta(optics, name: str) -> dict:
     """Layer metadata: the optics (the Optics widget can adopt them) and a YAML copy in the cache."""
-    path = cache_dir() / f"{name}-optics.yaml"
+    path = sample_cache.cache_dir() / f"{name}-optics.yaml"
     optics.to_yaml(path)
     return {
         "ssdpc": {
@@ -202,13 +128,13 @@ def bead_frames():
             return simulate(pmma_bead(), optics, rng=rng).frame
         return (flat_frame if kind == "flat" else white_frame)(optics, rng=rng)
 
-    frame = _cached("pmma_bead", lambda: simulated("bead", 0), _key("bead", *base, 0))
-    flat = _cached("pmma_bead_flat", lambda: simulated("flat", 1), _key("flat", *base, 1))
-    white = _cached("pmma_bead_white", lambda: simulated("white", 2), _key("white", *base, 2))
+    frame = sample_cache.cached("pmma_bead", lambda: simulated("bead", 0), sample_cache.key("bead", *base, 0))
+    flat = sample_cache.cached("pmma_bead_flat", lambda: simulated("flat", 1), sample_cache.key("flat", *base, 1))
+    white = sample_cache.cached("pmma_bead_white", lambda: simulated("white", 2), sample_cache.key("white", *base, 2))
     return frame, flat, white, optics
 
 
-def ship_frames(folder: Path = SHIPPED) -> list[Path]:
+def ship_frames(folder: Path = sample_cache.SHIPPED) -> list[Path]:
     """Write the frames that open a sample at once (zlib-compressed TIFFs) where the package reads
     them first: the bead's three, and the time series' flat, white and first frames.
 
@@ -235,7 +161,7 @@ def ship_frames(folder: Path = SHIPPED) -> list[Path]:
     folder.mkdir(parents=True, exist_ok=True)
     out = []
     shipped = ("pmma_bead*.tif", "moving_flat-*.tif", "moving_white-*.tif", f"moving_{SERIES_FRAMES}_000-*.tif")
-    for made in sorted(p for pattern in shipped for p in cache_dir().glob(pattern)):
+    for made in sorted(p for pattern in shipped for p in sample_cache.cache_dir().glob(pattern)):
         frame = read_frame(made, name="sample frame")
         if frame.shape == (BEAD_ROI_PX, BEAD_ROI_PX):
             tifffile.imwrite(folder / made.name, frame, compression="zlib", photometric="minisblack")
@@ -304,12 +230,16 @@ def series_frame(i: int, n_frames: int = SERIES_FRAMES) -> np.ndarray:
     optics = series_optics()
     phantom = moving_sample(n_frames)[i]
     source = Source(step=SERIES_SOURCE_STEP)
-    key = _key("moving", _physics(optics), repr(phantom), SERIES_SOURCE_STEP, 1000 + i, __version__)
-    return _cached(
+    key = sample_cache.key("moving", _physics(optics), repr(phantom), SERIES_SOURCE_STEP, 1000 + i, __version__)
+    return sample_cache.cached(
         f"moving_{n_frames}_{i:03d}",
         lambda: (
             simulate(
-                phantom, optics, source=source, rng=np.random.default_rng(1000 + i), progress=_unless_exiting
+                phantom,
+                optics,
+                source=source,
+                rng=np.random.default_rng(1000 + i),
+                progress=sample_cache.unless_exiting,
             ).frame
         ),
         key,
@@ -323,12 +253,14 @@ def series_flat_white():
 
     optics = series_optics()
     base = (_physics(optics), SERIES_SOURCE_STEP, __version__)
-    flat = _cached(
+    flat = sample_cache.cached(
         "moving_flat",
         lambda: flat_frame(optics, source=Source(step=SERIES_SOURCE_STEP), rng=np.random.default_rng(3)),
-        _key("flat", *base, 3),
+        sample_cache.key("flat", *base, 3),
     )
-    white = _cached("moving_white", lambda: white_frame(optics, rng=np.random.default_rng(4)), _key("white", *base, 4))
+    white = sample_cache.cached(
+        "moving_white", lambda: white_frame(optics, rng=np.random.default_rng(4)), sample_cache.key("white", *base, 4)
+    )
     return flat, white
 
 
@@ -349,7 +281,7 @@ class SeriesPrefetch:
         self._next = 0
         self._guard = threading.Lock()
         self.thread = threading.Thread(target=self._run, name="ssdpc series prefetch", daemon=True)
-        _BACKGROUND.append(self.thread)
+        sample_cache.BACKGROUND.append(self.thread)
         self.thread.start()
 
     def asked(self, i: int) -> None:
@@ -369,7 +301,7 @@ class SeriesPrefetch:
             return next((i for i in order if i not in self.made), None)
 
     def _run(self) -> None:
-        while not EXITING.is_set() and (i := self._pick()) is not None:
+        while not sample_cache.EXITING.is_set() and (i := self._pick()) is not None:
             try:
                 series_frame(i, self.n_frames)
             except Exception:  # the frame is simulated again when it is read, and raises there
@@ -403,7 +335,7 @@ def series_array(n_frames: int = SERIES_FRAMES, prefetch: bool = True):
             ahead.asked(i)
         return series_frame(i, n_frames)
 
-    tag = _key("moving", _physics(optics), SERIES_SOURCE_STEP, __version__)  # names the series for resuming
+    tag = sample_cache.key("moving", _physics(optics), SERIES_SOURCE_STEP, __version__)  # names the series for resuming
     frames = [
         da.from_delayed(dask.delayed(frame)(i), shape, dtype=np.uint16, name=f"moving-sample-{tag}-{n_frames}-{i}")
         for i in range(n_frames)

@@ -1,0 +1,123 @@
+"""The samples' cache: frames simulated once, kept under the package version, found again by a hash
+of everything that made them; and the background simulations that stop when napari exits."""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import hashlib
+import json
+import os
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from napari_ssdpc import __version__
+
+__all__ = ["BACKGROUND", "EXITING", "SHIPPED", "cache_dir", "cached", "key", "stop_background", "unless_exiting"]
+
+#: The frames that ship with the package.
+SHIPPED = Path(__file__).parent / "data"
+STALE_PART_S = 600.0  # an unfinished cache file older than this was left by an exit
+
+
+def cache_dir() -> Path:
+    """Where simulated sample frames are cached: ``$NAPARI_SSDPC_CACHE``/version (default ~/.cache/napari-ssdpc).
+
+    Returns
+    -------
+    Path
+    """
+    root = os.environ.get("NAPARI_SSDPC_CACHE") or Path.home() / ".cache" / "napari-ssdpc"
+    path = Path(root) / __version__
+    path.mkdir(parents=True, exist_ok=True)
+    for part in path.glob(".*.part"):  # a write that napari's exit cut short (background thread)
+        with contextlib.suppress(OSError):
+            if time.time() - part.stat().st_mtime > STALE_PART_S:
+                part.unlink()
+    return path
+
+
+def key(*parts) -> str:
+    """A short hash of everything that made a frame (its cache file's name carries it).
+
+    Parameters
+    ----------
+    *parts
+        JSON-able values (others by their repr).
+
+    Returns
+    -------
+    str
+        10 hex digits.
+    """
+    text = json.dumps(parts, sort_keys=True, default=repr)
+    return hashlib.sha1(text.encode()).hexdigest()[:10]
+
+
+#: Set when the interpreter exits: a background simulation stops within one source point (left
+#: running, it was torn down inside an FFT and napari's exit aborted: "terminate called ...").
+EXITING = threading.Event()
+BACKGROUND: list[threading.Thread] = []
+
+
+@atexit.register
+def stop_background() -> None:
+    """Stop the background simulations (at exit): set :data:`EXITING` and wait for their threads."""
+    EXITING.set()
+    for thread in BACKGROUND:
+        thread.join(timeout=30.0)
+
+
+def unless_exiting(done, total) -> None:
+    """A simulation's progress callback that ends it when the interpreter exits.
+
+    Parameters
+    ----------
+    done, total : int
+        The simulation's progress (unused).
+    """
+    if EXITING.is_set():
+        from napari_ssdpc.errors import Cancelled
+
+        raise Cancelled("napari is closing")
+
+
+_LOCKS: dict[Path, threading.Lock] = {}
+_LOCKS_GUARD = threading.Lock()
+
+
+def _file_lock(path: Path) -> threading.Lock:
+    """One lock per cache file: two threads asking for one frame simulate it once."""
+    with _LOCKS_GUARD:
+        return _LOCKS.setdefault(path, threading.Lock())
+
+
+def cached(name: str, make, key: str = "") -> np.ndarray:
+    """Read ``name`` from the shipped frames or the cache, or make it and write it there (atomically).
+
+    Parameters
+    ----------
+    name : str
+        The frame's name.
+    make : callable
+        ``make()`` gives the frame, (H, W).
+    key : str
+        :func:`key` of what made it ('' for none).
+
+    Returns
+    -------
+    ndarray, (H, W)
+    """
+    from napari_ssdpc.io.frames import read_frame, write_tiff
+
+    path = cache_dir() / (f"{name}-{key}.tif" if key else f"{name}.tif")
+    with _file_lock(path):
+        for known in (SHIPPED / path.name, path):  # shipped with the package, else made here before
+            if known.is_file():
+                return read_frame(known, allow_series=False, name="sample frame")
+        data = make()
+        write_tiff(path, data, photometric="minisblack")
+    return data
