@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from napari_ssdpc._napari import sample_data
+from napari_ssdpc._napari import sample_cache, sample_data
 
 
 def test_the_bead_sample_opens_from_the_shipped_frames_without_simulating(tmp_path, monkeypatch):
@@ -38,9 +38,9 @@ def test_the_shipped_frames_are_what_the_simulator_makes_now(tmp_path, monkeypat
         return [*sample_data.bead_frames()[:3], *sample_data.series_flat_white(), sample_data.series_frame(0)]
 
     monkeypatch.setenv("NAPARI_SSDPC_CACHE", str(tmp_path / "cache"))
-    monkeypatch.setattr(sample_data, "SHIPPED", tmp_path / "none")  # simulate, do not read the shipped ones
+    monkeypatch.setattr(sample_cache, "SHIPPED", tmp_path / "none")  # simulate, do not read the shipped ones
     made = frames()
-    monkeypatch.setattr(sample_data, "SHIPPED", sample_data.Path(sample_data.__file__).parent / "data")
+    monkeypatch.setattr(sample_cache, "SHIPPED", sample_cache.Path(sample_cache.__file__).parent / "data")
     monkeypatch.setenv("NAPARI_SSDPC_CACHE", str(tmp_path / "empty"))
     shipped = frames()
     assert not list((tmp_path / "empty").rglob("*.tif"))
