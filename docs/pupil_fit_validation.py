@@ -11,7 +11,10 @@ and the fit's time. Writes docs/pupil_fit_validation.json (with ``--condenser``,
 at NA 0.26 and 0.01 NA off axis: docs/pupil_fit_validation-condenser.json; with ``--only KIND``, one
 imperfection alone: ``sph`` the spherical aberration, ``def`` the views' defocus, ``cond`` the condenser,
 ``lens`` the lenslets' centres and focal lengths off by up to 1 %: docs/pupil_fit_validation-KIND.json)
-and prints a Markdown table. With ``--cell``, a cell imaged by the same instrument too.
+and prints a Markdown table. With ``--cell``, a cell imaged by the same instrument too. With
+``--pmma``, the instrument in oil (n 1.518) with all three imperfections: the pupil fitted to two
+6 µm PMMA beads (n 1.49, known) and the paper's 13 µm PMMA bead imaged by it on another frame,
+reconstructed with each optics (docs/pupil_fit_validation-pmma.json).
 
     python docs/pupil_fit_validation.py --cache /tmp/cases
 """
@@ -35,7 +38,7 @@ from napari_ssdpc.settings.aberrations import Aberrations, LensletTerms
 from napari_ssdpc.simulation import phantoms as ph
 from napari_ssdpc.validation import cases as val
 from napari_ssdpc.validation import truth as vt
-from napari_ssdpc.validation.mass import masses_and_false
+from napari_ssdpc.validation.mass import mass_and_tail, masses_and_false
 
 HERE = Path(__file__).parent
 MEDIUM = 1.33
@@ -44,6 +47,9 @@ SPHERICAL, DEFOCUS = 0.224, 0.5
 #: The cell's truth is blurred to this (FWHM_z, FWHM_xy), µm, before it is correlated.
 CELL_RESOLUTION_UM = (20.7, 3.9)
 BEADS = (ph.Sphere((-20.0, 5.0, -10.0), 6.0, MEDIUM + 0.03), ph.Sphere((20.0, -5.0, 15.0), 6.0, MEDIUM + 0.03))
+#: ``--pmma``: the oil, the beads' known index, and the bead frame the pupil is fitted to.
+OIL, PMMA_RI = 1.518, 1.49
+PMMA_BEADS = tuple(ph.Sphere(b.center_um, b.diameter_um, PMMA_RI, medium_index=OIL) for b in BEADS)
 
 
 def _lenslets(nominal, lenslets):
@@ -94,6 +100,28 @@ def _cell(truth, runs, cache, name) -> list:
     return rows
 
 
+def _pmma(truth, runs, cache, name) -> list:
+    """The paper's PMMA bead (13 µm, n 1.49 in oil; 4.4 rad) on a frame of its own, imaged by the
+    same instrument and reconstructed with each optics: integrated Δn over its disk and peak Δn over
+    the truth's, and its centroid's depth error (docs/validation.md)."""
+    bead = ph.pmma_bead()
+    case = val.simulate_case(f"{name}-pmma13", bead, truth, cache_dir=cache, source_step=4)
+    rows = []
+    for how, (optics, c) in runs.items():
+        res = Reconstructor(val.run_config(optics, z=Z_UM, dz=1.0), c, flat=case.flat).reconstruct(case.frame)
+        m = vt.bead_metrics(res, bead, OIL)
+        rows.append(
+            {
+                "optics": how,
+                "mass_ratio": mass_and_tail(res, bead, OIL)["integrated"],
+                "peak_ratio": m["dn_peak"] / m["dn_true"],
+                "depth_error_um": m["centroid_um"][2],
+            }
+        )
+        print(json.dumps(rows[-1], default=float), flush=True)
+    return rows
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--cache", default=None, help="folder for the simulated frames")
@@ -103,18 +131,20 @@ def main():
     )
     p.add_argument("--only", choices=sorted(ALONE), help="one imperfection alone instead")
     p.add_argument("--cell", action="store_true", help="also a cell imaged by the same instrument")
+    p.add_argument("--pmma", action="store_true", help="in oil: fitted to PMMA beads, the 13 µm PMMA bead measured")
     args = p.parse_args()
-    nominal = val.paper_optics(0.25).replace(medium_index=MEDIUM)
+    medium, beads = (OIL, PMMA_BEADS) if args.pmma else (MEDIUM, BEADS)
+    nominal = val.paper_optics(0.25).replace(medium_index=medium)
     lenslets = Grid.nominal(nominal).lenslets(nominal)
     if args.only:
         truth, name = ALONE[args.only](nominal, lenslets), f"pf1-{args.only}"
     else:
         terms = tuple(LensletTerms(row=ln.row, col=ln.col, defocus_waves=DEFOCUS) for ln in lenslets)
-        offset = (0.01, 0.0) if args.condenser else (0.0, 0.0)
+        offset = (0.01, 0.0) if args.condenser or args.pmma else (0.0, 0.0)
         ab = Aberrations(objective_zernike_waves=(0.0,) * 10 + (SPHERICAL,), lenslets=terms, condenser_offset_na=offset)
-        truth = nominal.replace(aberrations=ab, condenser_na=0.26 if args.condenser else 0.25)
-        name = "pf-two-condenser" if args.condenser else "pf-two"
-    case = val.simulate_case(name, ph.Spheres(BEADS, medium_index=MEDIUM), truth, cache_dir=args.cache, source_step=4)
+        truth = nominal.replace(aberrations=ab, condenser_na=0.26 if args.condenser or args.pmma else 0.25)
+        name = "pf-two-pmma" if args.pmma else "pf-two-condenser" if args.condenser else "pf-two"
+    case = val.simulate_case(name, ph.Spheres(beads, medium_index=medium), truth, cache_dir=args.cache, source_step=4)
     cal = calibrate(case.white, nominal)
     seconds = None
     if args.fitted:
@@ -122,7 +152,8 @@ def main():
     else:
         t0 = time.perf_counter()
         cfg = val.run_config(nominal, z=Z_UM, dz=1.0)
-        fit = fit_optics(cal, case.flat, nominal, case.white, beads=BeadFrame(cfg, case.frame, None, name))
+        known = PMMA_RI if args.pmma else None
+        fit = fit_optics(cal, case.flat, nominal, case.white, beads=BeadFrame(cfg, case.frame, known, name))
         seconds = time.perf_counter() - t0
         print("\n".join(fit.report()), flush=True)
         fitted = fit.calibration
@@ -134,12 +165,14 @@ def main():
     out = {"fit_seconds": seconds, "fitted": fitted.optics_fit.get("pupil"), "rows": []}
     for how, (optics, c) in runs.items():
         rec = Reconstructor(val.run_config(optics, z=Z_UM, dz=1.0), c, flat=case.flat)
-        m = masses_and_false(rec.reconstruct(case.frame), BEADS, MEDIUM)
+        m = masses_and_false(rec.reconstruct(case.frame), beads, medium)
         row = {"optics": how, "masses": m["masses"], "centroids_z_um": m["centroids_z_um"], "false": m["false"]}
         out["rows"].append(row)
         print(json.dumps(row, default=float), flush=True)
     if args.cell:
         out["cell"] = _cell(truth, runs, args.cache, name)
+    if args.pmma:
+        out["pmma"] = _pmma(truth, runs, args.cache, name)
     (HERE / f"{name.replace('pf-two', 'pupil_fit_validation').replace('pf1', 'pupil_fit_validation')}.json").write_text(
         json.dumps(out, indent=1, default=float)
     )
