@@ -90,14 +90,14 @@ def test_the_sign_of_the_defocus_is_the_beads(bead_views):
         assert job.residual_over_noise(fitted.cost, NOISE) < 1.1
 
 
-def _fit(sigma=0.01, converged=True, explained=True) -> PupilFit:
+def _fit(sigma=0.01, converged=True, explained=True, medium_index=None) -> PupilFit:
     from napari_ssdpc.reconstruction.bead import Bead
 
     bead = Bead((0.0, 0.0, 4.0), 5.0, 1.36, 0.03, 30.0 if not explained else 1.0, 1.5, True, explained)
     keys = ((0, 0), (0, 1))
     return PupilFit(
         (5, 11), np.array([0.05, 0.2]), np.array([0.01, sigma]), keys, np.array([0.3, 0.31]), np.array([0.01, 0.01]),
-        (bead,), 12.0, 1.1, converged,
+        (bead,), 12.0, 1.1, converged, medium_index,
     )  # fmt: skip
 
 
@@ -124,3 +124,28 @@ def test_a_fit_that_cannot_be_trusted_is_refused_in_one_line(fit, words):
     with pytest.raises(SsdpcError, match=words) as err:
         check_pupil_fit(fit, 1.36)
     assert "\n" not in str(err.value) and "nothing written" in str(err.value)
+
+
+def test_a_pupil_fitted_to_beads_holds_for_samples_in_their_medium(monkeypatch):
+    """The fitted calibration takes the beads' medium (a spherical aberration changes with it), and
+    optics of another medium are refused in one line that names the fit in theirs."""
+    from napari_ssdpc.calibration import calibrate
+    from napari_ssdpc.physics.lattice import Grid
+    from napari_ssdpc.reconstruction import optics_fit
+    from napari_ssdpc.reconstruction.checks import check_optics_match
+    from napari_ssdpc.settings.config import RunConfig
+    from napari_ssdpc.simulation.sample_free import flat_frame, white_frame
+
+    oil = Optics.paper().replace(condenser_na=0.25)
+    grid = Grid.nominal(oil, axis_offset_px=(2.3, -1.4))
+    cal = calibrate(white_frame(oil, grid=grid, rng=1), oil)
+    monkeypatch.setattr(optics_fit, "fit_pupil", lambda *a, **k: _fit(medium_index=1.33))
+    water = RunConfig.of(oil.replace(medium_index=1.33))
+    fitted = optics_fit.fit_optics(cal, flat_frame(oil, grid=grid, rng=2), beads=optics_fit.BeadFrame(water, None))
+    assert fitted.calibration.optics.medium_index == 1.33
+    assert fitted.calibration.optics_fit["pupil"]["medium_index"] == 1.33
+    assert "beads in a medium of 1.330" in "\n".join(fitted.report())
+    check_optics_match(water.optics, fitted.calibration)
+    with pytest.raises(SsdpcError, match=r"fitted to beads in 1\.33 .*--medium-index 1\.518 ") as err:
+        check_optics_match(oil, fitted.calibration)
+    assert "\n" not in str(err.value)

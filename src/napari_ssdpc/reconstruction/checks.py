@@ -84,6 +84,13 @@ def check_optics_match(optics, cal, source: str = "--optics") -> None:
         a, b = getattr(optics, attr), getattr(cal.optics, attr)
         if (a != b) if tol is None else abs(float(a) - float(b)) > tol * abs(float(b)):
             va, vb = (str(a).lower(), str(b).lower()) if tol is None else (f"{a:g}{unit}", f"{b:g}{unit}")
+            if attr == "medium_index" and "pupil" in cal.optics_fit:
+                raise SsdpcError(
+                    f"the optics ({source}) give a medium index of {va}, the calibration's objective aberration "
+                    f"was fitted to beads in {vb} (a spherical aberration changes with the medium): fit the "
+                    f"optics to beads in this medium (`ssdpc fit-optics BEADS.tif --calibration CAL --flat FLAT "
+                    f"--medium-index {va} -o FITTED.json`), or give the optics the calibration was made with"
+                )
             raise SsdpcError(
                 f"the optics ({source}) and the calibration disagree on the {what} ({_key(attr)}: {va} vs "
                 f"{vb} in the calibration); give the optics the calibration was made with, or recalibrate with "

@@ -133,6 +133,8 @@ def fit_optics(
         beads.config, fitted, flat, beads.frame, focus=focus, bead_ri=beads.bead_ri, name=beads.name,
         progress=progress, should_stop=should_stop,
     )  # fmt: skip
-    optics_with = fitted.optics.replace(aberrations=pupil.aberrations(fitted.optics.aberrations).to_dict())
+    aberrations = pupil.aberrations(fitted.optics.aberrations).to_dict()
+    medium = beads.config.optics.medium_index  # the pupil holds for samples in the beads' medium
+    optics_with = fitted.optics.replace(medium_index=medium, aberrations=aberrations)
     fitted = dataclasses.replace(fitted, optics=optics_with, optics_fit={**fitted.optics_fit, "pupil": pupil.to_dict()})
     return OpticsFit(fitted, condenser, focus, pupil)

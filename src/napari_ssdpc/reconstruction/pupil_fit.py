@@ -67,6 +67,8 @@ class PupilFit:
         fit started from (the beads fitted again under it) and with the fitted one.
     converged : bool
         The fit ended on its convergence test.
+    medium_index : float or None
+        The beads' medium: the objective's spherical aberration holds for samples in it.
     """
 
     noll: tuple[int, ...]
@@ -79,6 +81,7 @@ class PupilFit:
     residual_before: float
     residual_after: float
     converged: bool
+    medium_index: float | None = None
 
     def aberrations(self, base: Aberrations) -> Aberrations:
         """``base`` with the fitted objective terms and each view's fitted defocus.
@@ -108,8 +111,10 @@ class PupilFit:
             f"Z{j} {c:+.3f} ± {s:.3f}" for j, c, s in zip(self.noll, self.zernike_waves, self.zernike_sigma)
         )
         d, s = self.defocus_waves, self.defocus_sigma
+        n = self.medium_index
+        medium = "" if n is None else f" (beads in a medium of {n:.3f}: for samples in it)"
         return [
-            f"objective (waves rms): {terms}",
+            f"objective (waves rms): {terms}{medium}",
             f"view defocus {np.mean(d):+.3f} waves at the sub-aperture's edge (range {d.min():+.3f} to {d.max():+.3f}, "
             f"± {np.median(s):.3f}; {len(d)} views)",
             f"beads: {len(self.beads)}, residual {self.residual_before:.1f} -> {self.residual_after:.1f} x the noise "
@@ -127,6 +132,7 @@ class PupilFit:
             "beads": [b.to_dict() for b in self.beads],
             "residual_before": float(self.residual_before),
             "residual_after": float(self.residual_after),
+            "medium_index": None if self.medium_index is None else float(self.medium_index),
         }
 
 
@@ -316,6 +322,7 @@ def fit_pupil(
         job.residual_over_noise(before.cost, noise),
         job.residual_over_noise(fitted.cost, noise),
         fitted.converged,
+        medium,
     )
     check_pupil_fit(result, bead_ri)
     return result
