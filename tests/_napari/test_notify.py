@@ -74,3 +74,19 @@ def test_the_instruments_notices_name_the_fit_in_the_dock():
         text = gui_words(note)
         assert "with Fit the optics (Calibrate tab: the bead frame, the flat and the white frame)" in text
         assert "--" not in text and "`ssdpc" not in text
+
+
+def test_a_calibration_fitted_in_another_medium_names_the_fit_in_the_dock():
+    from types import SimpleNamespace
+
+    from napari_ssdpc.errors import SsdpcError
+    from napari_ssdpc.reconstruction.checks import check_optics_match
+    from napari_ssdpc.settings.optics import Optics
+
+    water = Optics.paper().replace(medium_index=1.33)
+    cal = SimpleNamespace(optics=water, optics_fit={"pupil": {}})  # what the check reads first
+    with pytest.raises(SsdpcError) as err:
+        check_optics_match(Optics.paper(), cal)
+    text = gui_words(err.value)
+    assert "Fit the optics in the Calibrate tab, on a frame of beads in it, the medium's index 1.518" in text
+    assert "--" not in text and "`ssdpc" not in text

@@ -19,6 +19,10 @@ _GUI_WORDS = (
         r"with `ssdpc fit-optics BEADS\.tif --calibration CAL --flat FLAT --white WHITE -o FITTED\.json`",
         "with Fit the optics (Calibrate tab: the bead frame, the flat and the white frame)",
     ),
+    (
+        r"\(`ssdpc fit-optics BEADS\.tif --calibration CAL --flat FLAT --medium-index ([0-9.]+) -o FITTED\.json`\)",
+        r"(Fit the optics in the Calibrate tab, on a frame of beads in it, the medium's index \1 in the Optics tab)",
+    ),
     (r"`ssdpc fit-optics`", "Fit the optics in the Calibrate tab"),
     (r"--calibration\b", "the calibration (Method tab)"),
     (r"--flat\b", "the flat frame (Reconstruct tab)"),
