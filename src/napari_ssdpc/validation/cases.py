@@ -7,6 +7,7 @@ Used by the slow tests and by ``docs/make_validation.py``; also useful to plan a
 
 from __future__ import annotations
 
+import json
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -99,9 +100,13 @@ def simulate_case(
     step = "" if source_step == 2 else f"_step{source_step}"
     path = None if cache_dir is None else Path(cache_dir) / f"{name}_na{optics.condenser_na:g}_s{seed}{step}.npz"
     source = Source(step=source_step)
+    # what the frames are of: a cached file of another phantom or instrument under the same name is
+    # simulated again (files cached before this was kept are taken as they are)
+    what = json.dumps([repr(phantom), optics.to_dict(), list(axis_offset_px), rotation_deg], default=str)
     if path is not None and path.is_file():
         d = np.load(path)
-        return Case(name, optics, phantom, d["frame"], d["flat"], d["white"], grid, float(d["seconds"]))
+        if "what" not in d or str(d["what"]) == what:
+            return Case(name, optics, phantom, d["frame"], d["flat"], d["white"], grid, float(d["seconds"]))
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
     phs = phantom if isinstance(phantom, list) else [phantom]
@@ -114,7 +119,7 @@ def simulate_case(
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             with atomic_write(path) as tmp, open(tmp, "wb") as f:
-                np.savez_compressed(f, frame=frame, flat=flat, white=white, seconds=seconds)
+                np.savez_compressed(f, frame=frame, flat=flat, white=white, seconds=seconds, what=what)
         except OSError as e:  # the cache only saves time: go on without it
             warnings.warn(
                 f"could not cache {name} in {path.parent} ({e.strerror}); it is simulated again next time",
