@@ -149,3 +149,67 @@ def test_a_pupil_fitted_to_beads_holds_for_samples_in_their_medium(monkeypatch):
     with pytest.raises(SsdpcError, match=r"fitted to beads in 1\.33 .*--medium-index 1\.518 ") as err:
         check_optics_match(oil, fitted.calibration)
     assert "\n" not in str(err.value)
+
+
+def test_beads_found_under_a_pupil_far_off_are_searched_again_under_the_one_reached(monkeypatch):
+    """A joint fit that ends without converging (its beads found a wave of phase off under a pupil far
+    from the instrument's) is started again from the pupil it reached, the beads searched under that
+    pupil; a fit that converges there is the answer (the search and fits themselves are stand-ins)."""
+    from types import SimpleNamespace
+
+    from napari_ssdpc.calibration import calibrate
+    from napari_ssdpc.physics.lattice import Grid
+    from napari_ssdpc.reconstruction import beads as beads_module
+    from napari_ssdpc.reconstruction import pupil_fit, reconstructor
+    from napari_ssdpc.reconstruction.bead import Bead
+    from napari_ssdpc.reconstruction.beads_and_pupil import Fitted
+    from napari_ssdpc.settings.config import RunConfig
+    from napari_ssdpc.simulation.sample_free import white_frame
+
+    optics = Optics.paper().replace(condenser_na=0.25)
+    cal = calibrate(white_frame(optics, grid=Grid.nominal(optics), rng=1), optics)
+    searched_under, fits = [], []
+
+    class Rec:  # the views and the optics of a start pupil
+        def __init__(self, config, start, flat):
+            self.optics, self.backend, self.z_um = start.optics, None, np.zeros(1)
+            self.views = SimpleNamespace(lenslets=start.lenslets, measure=lambda frame, name: (None, None))
+
+    def fit_beads(measurements, views, dn, z_um, optics, **_):
+        searched_under.append((*optics.aberrations.objective_zernike_waves, *[0.0] * 11)[10])
+        return [Bead((0.0, 0.0, 0.0), 5.0, 1.36, 0.03, 1.0, 1.5, True, True)]
+
+    class Job:  # ends 0.43 waves along on its first fit, unconverged; converges from there
+        def __init__(self, measurements, views, spheres, settings, noll, base_z, d0, backend):
+            self.d0, self.spheres = np.asarray(d0), spheres
+
+        def pack(self, spheres, zernike):
+            return np.concatenate([np.ravel(spheres), zernike, [0.0]])
+
+        def unpack(self, q):
+            return q[:5].reshape(1, 5), q[5:-1], self.d0 + q[-1]
+
+        def fit(self, q0, hold_pupil=False, **_):
+            q = q0.copy()
+            if not hold_pupil:
+                q[-2] = 0.43 if not fits else 0.447
+                fits.append(q0[-2])
+            return Fitted(q, 1.0, hold_pupil or len(fits) > 1, np.eye(len(q)), list(range(len(q))))
+
+        def beads(self, q, converged, *_):
+            return [Bead((0.0, 0.0, 0.0), 5.0, 1.36, 0.03, 1.0, 1.5, converged, True)]
+
+        def sigmas(self, fitted, noise):
+            return np.full(len(fitted.q), 0.001)
+
+        def residual_over_noise(self, cost, noise):
+            return cost
+
+    monkeypatch.setattr(reconstructor, "Reconstructor", Rec)
+    monkeypatch.setattr(beads_module, "first_answer", lambda rec, views, **_: (None, 0.01))
+    monkeypatch.setattr(beads_module, "fit_beads", fit_beads)
+    monkeypatch.setattr(pupil_fit, "BeadsAndPupil", Job)
+    fit = pupil_fit.fit_pupil(RunConfig.of(optics), cal, None, None)
+    assert searched_under == [0.0, 0.43]  # the beads searched again under the pupil the first fit reached
+    assert fits == [0.0, 0.43]  # and the second fit started there
+    assert fit.converged and fit.zernike_waves[-1] == 0.447

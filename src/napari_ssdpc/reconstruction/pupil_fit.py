@@ -16,7 +16,9 @@ fitted far from its place under a wrong pupil keeps it there), so each start pup
 the full bead search (:func:`~napari_ssdpc.reconstruction.beads.fit_beads`) with that pupil; a blurred
 white frame gives each view's |d_k| (:mod:`~napari_ssdpc.calibration.view_focus`) but not its sign, so
 both signs are started (the second only when the first leaves a bead unexplained: a pupil of the wrong
-sign cannot explain them) and the lower misfit is kept.
+sign cannot explain them) and the lower misfit is kept. A fit that ends without converging (beads
+found under a pupil far from the instrument's can sit a wave of phase off and hold it) is started
+once more from the pupil it reached, the beads searched again under that pupil.
 
 The terms' uncertainties are the Gauss-Newton covariance σ² (JᵀJ)⁻¹ at the fit, σ the views' noise; a
 term the frame does not determine (σ above :data:`UNDETERMINED_WAVES`) is refused in one line. Piston,
@@ -250,7 +252,7 @@ def fit_pupil(
             f"{DN_LIMIT} (set --medium-index to the beads' medium)"
         )
     signs = (1.0, -1.0) if focus is not None and focus.blurred else (0.0,)
-    total = 3 * len(signs) + 1  # a start that explains every bead ends the starts early
+    total = 3 * (len(signs) + 1) + 1  # a start that explains every bead ends the starts early
     done = 0
 
     def step(label: str) -> None:
@@ -262,11 +264,15 @@ def fit_pupil(
     base_z = np.zeros(max(max(noll), len(given.objective_zernike_waves)))
     base_z[: len(given.objective_zernike_waves)] = given.objective_zernike_waves
     zernike0 = base_z[np.asarray(noll) - 1]
-    best = None
-    for sign in signs:
-        keys = [(ln.row, ln.col) for ln in cal.lenslets]
-        defocus = start_defocus(keys, focus, sign, given) if sign else None
-        start = cal if defocus is None else with_pupil(cal, base_z, keys, defocus)
+    keys = [(ln.row, ln.col) for ln in cal.lenslets]
+    # each start: the objective's terms and each lenslet's defocus (None: the given optics')
+    starts: list[tuple[np.ndarray, np.ndarray | None]] = [
+        (base_z, start_defocus(keys, focus, sign, given) if sign else None) for sign in signs
+    ]
+    best, again = None, True
+    while starts:
+        start_z, defocus = starts.pop(0)
+        start = cal if defocus is None and start_z is base_z else with_pupil(cal, start_z, keys, defocus)
         rec = Reconstructor(config, start, flat=flat)
         views, _ = rec.views.measure(frame, name)
         dn, noise = first_answer(rec, views, should_stop=should_stop)
@@ -283,9 +289,10 @@ def fit_pupil(
             [[*b.centre_um, b.diameter_um / 2, b.delta_n if bead_dn is None else bead_dn] for b in beads]
         )
         view_keys = [(ln.row, ln.col) for ln in rec.views.lenslets]
-        d0 = start_defocus(view_keys, focus if sign else None, sign or 1.0, given)
-        job = BeadsAndPupil(rec.views, views, spheres, settings, noll, base_z, d0, rec.backend)
-        fitted = job.fit(job.pack(spheres, zernike0), fixed_dn=bead_dn, steps=steps, should_stop=should_stop)
+        d0 = np.array([rec.optics.aberrations.lenslet(*k).defocus_waves for k in view_keys], float)
+        job = BeadsAndPupil(rec.views, views, spheres, settings, noll, start_z, d0, rec.backend)
+        q0 = job.pack(spheres, start_z[np.asarray(noll) - 1])
+        fitted = job.fit(q0, fixed_dn=bead_dn, steps=steps, should_stop=should_stop)
         step("beads and pupil together")
         if best is None or fitted.cost < best[0].cost:
             best = (fitted, job, noise, rec)
@@ -294,8 +301,19 @@ def fit_pupil(
         if fitted.converged and all(
             b.explained for b in job.beads(fitted.q, True, noise, rec.optics, config.reconstruction.multislice)
         ):
+            best = (fitted, job, noise, rec)
             break
-    assert best is not None  # signs holds at least one start
+        if not fitted.converged and again:
+            # beads searched under a pupil far from the instrument's can sit a wave of phase off (a
+            # one-wave spherical aberration: found 1.5-2 x too large and 4-6 x too strong) and hold the
+            # pupil's fit: they are searched again under the pupil it reached, and fitted from there
+            _, z_end, d_end = job.unpack(fitted.q)
+            reached = start_z.copy()
+            reached[np.asarray(noll) - 1] = z_end
+            ended = dict(zip(view_keys, d_end))
+            starts.insert(0, (reached, np.array([ended.get(k, given.lenslet(*k).defocus_waves) for k in keys])))
+            again = False
+    assert best is not None  # there is at least one start
     fitted, job, noise, rec = best
     spheres, zernike, defocus = job.unpack(fitted.q)
     sigma = job.sigmas(fitted, noise)
@@ -343,9 +361,11 @@ def check_pupil_fit(fit: PupilFit, bead_ri: float | None) -> None:
         One line that says which.
     """
     if not fit.converged:
+        terms = ", ".join(f"Z{j} {c:+.3f}" for j, c in zip(fit.noll, fit.zernike_waves))
         raise SsdpcError(
-            "the fit of the pupil to the beads did not converge; nothing written (give a frame with fewer, "
-            "isolated beads)"
+            f"the fit of the pupil to the beads did not converge (where it stopped: {terms} waves, residual "
+            f"{fit.residual_before:.1f} -> {fit.residual_after:.1f} x the noise); nothing written (give a frame "
+            "with fewer, isolated beads, or optics nearer the instrument's to start from: --optics)"
         )
     unexplained = [b for b in fit.beads if not b.explained]
     if unexplained:
