@@ -90,10 +90,11 @@ def test_the_sign_of_the_defocus_is_the_beads(bead_views):
         assert job.residual_over_noise(fitted.cost, NOISE) < 1.1
 
 
-def _fit(sigma=0.01, converged=True, explained=True, medium_index=None) -> PupilFit:
+def _fit(sigma=0.01, converged=True, explained=True, medium_index=None, outside=False) -> PupilFit:
     from napari_ssdpc.reconstruction.bead import Bead
 
-    bead = Bead((0.0, 0.0, 4.0), 5.0, 1.36, 0.03, 30.0 if not explained else 1.0, 1.5, True, explained)
+    residual = None if outside else 30.0 if not explained else 1.0
+    bead = Bead((0.0, 0.0, 4.0), 5.0, 1.36, 0.03, residual, 1.5, True, explained and not outside)
     keys = ((0, 0), (0, 1))
     return PupilFit(
         (5, 11), np.array([0.05, 0.2]), np.array([0.01, sigma]), keys, np.array([0.3, 0.31]), np.array([0.01, 0.01]),
@@ -118,6 +119,7 @@ def test_the_fitted_terms_go_into_the_optics_and_the_report():
         (_fit(sigma=0.2), "does not determine Z11"),
         (_fit(converged=False), "did not converge"),
         (_fit(explained=False), "beads of another index than --bead-ri 1.36"),
+        (_fit(outside=True), r"moved a bead out of the views of its region \(to \(0\.0, 0\.0, 4\.0\) µm\)"),
     ],
 )
 def test_a_fit_that_cannot_be_trusted_is_refused_in_one_line(fit, words):

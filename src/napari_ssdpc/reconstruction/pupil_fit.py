@@ -367,6 +367,13 @@ def check_pupil_fit(fit: PupilFit, bead_ri: float | None) -> None:
             f"{fit.residual_before:.1f} -> {fit.residual_after:.1f} x the noise); nothing written (give a frame "
             "with fewer, isolated beads, or optics nearer the instrument's to start from: --optics)"
         )
+    outside = [b for b in fit.beads if b.residual_over_noise is None]
+    if outside:
+        x, y, z = outside[0].centre_um
+        raise SsdpcError(
+            f"the fit moved a bead out of the views of its region (to ({x:.1f}, {y:.1f}, {z:.1f}) µm): objects "
+            "that are not beads, or an instrument the pupil's terms do not describe; nothing written"
+        )
     unexplained = [b for b in fit.beads if not b.explained]
     if unexplained:
         b = unexplained[0]
