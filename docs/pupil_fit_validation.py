@@ -89,14 +89,21 @@ ALONE = {
 }
 
 
+def _reconstructed(case, runs, method: str = "tv"):
+    """The case's frame reconstructed by ``method`` with each optics of ``runs``: (how, result, seconds)."""
+    for how, (optics, c) in runs.items():
+        t0 = time.perf_counter()
+        rec = Reconstructor(val.run_config(optics, z=Z_UM, dz=1.0, method=method), c, flat=case.flat)
+        yield how, rec.reconstruct(case.frame), time.perf_counter() - t0
+
+
 def _cell(truth, runs, cache, name) -> list:
     """A cell (n 1.37, nucleus 1.39, in water) imaged by the same instrument, reconstructed with each
     optics: its Δn's correlation with the truth blurred to the resolution, its integrated Δn and peak
     over the truth's, and its depth error (docs/validation.md)."""
     case = val.simulate_case(f"{name}-cell", ph.cell(), truth, cache_dir=cache, source_step=4)
     rows = []
-    for how, (optics, c) in runs.items():
-        res = Reconstructor(val.run_config(optics, z=Z_UM, dz=1.0), c, flat=case.flat).reconstruct(case.frame)
+    for how, res, _ in _reconstructed(case, runs):
         m = vt.truth_metrics(res, case.phantom, MEDIUM, CELL_RESOLUTION_UM)
         peak = float(np.max(res.delta_n)) / float(np.max(vt.truth_volume(case.phantom, res, MEDIUM)))
         rows.append({"optics": how, **m, "peak_ratio": peak})
@@ -112,10 +119,7 @@ def _pmma(truth, runs, cache, name) -> list:
     case = val.simulate_case(f"{name}-pmma13", bead, truth, cache_dir=cache, source_step=4)
     rows = []
     for method in ("tv", "multislice"):
-        for how, (optics, c) in runs.items():
-            t0 = time.perf_counter()
-            cfg = val.run_config(optics, z=Z_UM, dz=1.0, method=method)
-            res = Reconstructor(cfg, c, flat=case.flat).reconstruct(case.frame)
+        for how, res, seconds in _reconstructed(case, runs, method):
             m = vt.bead_metrics(res, bead, OIL)
             rows.append(
                 {
@@ -125,7 +129,7 @@ def _pmma(truth, runs, cache, name) -> list:
                     "peak_ratio": m["dn_peak"] / m["dn_true"],
                     "ri_centre": m["ri_centre"],
                     "depth_error_um": m["centroid_um"][2],
-                    "seconds": time.perf_counter() - t0,
+                    "seconds": seconds,
                 }
             )
             print(json.dumps(rows[-1], default=float), flush=True)
@@ -175,9 +179,8 @@ def main():
         "true optics": (truth, dataclasses.replace(cal, optics=truth)),
     }
     out = {"fit_seconds": seconds, "fitted": fitted.optics_fit.get("pupil"), "rows": []}
-    for how, (optics, c) in runs.items():
-        rec = Reconstructor(val.run_config(optics, z=Z_UM, dz=1.0), c, flat=case.flat)
-        m = masses_and_false(rec.reconstruct(case.frame), beads, medium)
+    for how, res, _ in _reconstructed(case, runs):
+        m = masses_and_false(res, beads, medium)
         row = {"optics": how, "masses": m["masses"], "centroids_z_um": m["centroids_z_um"], "false": m["false"]}
         out["rows"].append(row)
         print(json.dumps(row, default=float), flush=True)

@@ -81,9 +81,10 @@ def test_imperfect_array_offsets_and_shear():
 def _misfit_over_rho(u, u_true, rho):
     """Each sub-aperture centre's distance from the truth over the sub-aperture radius, after the
     rotation and shift that best match the two sets (the frame of the views is a choice)."""
+    from scipy.linalg import orthogonal_procrustes
+
     a, b = u_true - u_true.mean(axis=0), u - u.mean(axis=0)
-    left, _, right = np.linalg.svd(a.T @ b)
-    return np.hypot(*(a @ left @ right - b).T) / rho
+    return np.hypot(*(a @ orthogonal_procrustes(a, b)[0] - b).T) / rho
 
 
 def test_sub_apertures_are_where_the_lenslets_are():

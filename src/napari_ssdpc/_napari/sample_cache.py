@@ -16,7 +16,17 @@ import numpy as np
 
 from napari_ssdpc import __version__
 
-__all__ = ["BACKGROUND", "EXITING", "SHIPPED", "cache_dir", "cached", "key", "stop_background", "unless_exiting"]
+__all__ = [
+    "BACKGROUND",
+    "EXITING",
+    "SHIPPED",
+    "Prefetch",
+    "cache_dir",
+    "cached",
+    "key",
+    "stop_background",
+    "unless_exiting",
+]
 
 #: The frames that ship with the package.
 SHIPPED = Path(__file__).parent / "data"
@@ -121,3 +131,53 @@ def cached(name: str, make, key: str = "") -> np.ndarray:
         data = make()
         write_tiff(path, data, photometric="minisblack")
     return data
+
+
+class Prefetch:
+    """Simulates (or reads from the cache) every frame of a series in a background thread that stops
+    when napari exits (:func:`stop_background`).
+
+    It works onward from the last frame read (:meth:`asked`), wrapping round, so that the frames
+    after the one on screen are ready first; it stops when every frame is cached.
+
+    Parameters
+    ----------
+    make : callable
+        ``make(i)`` simulates or reads frame ``i`` (into the cache).
+    n_frames : int
+    """
+
+    def __init__(self, make, n_frames: int):
+        self.make = make
+        self.n_frames = int(n_frames)
+        self.made: set[int] = set()
+        self._next = 0
+        self._guard = threading.Lock()
+        self.thread = threading.Thread(target=self._run, name="ssdpc series prefetch", daemon=True)
+        BACKGROUND.append(self.thread)
+        self.thread.start()
+
+    def asked(self, i: int) -> None:
+        """Frame ``i`` was read: go on from the frame after it.
+
+        Parameters
+        ----------
+        i : int
+            The frame read.
+        """
+        with self._guard:
+            self._next = (int(i) + 1) % self.n_frames
+
+    def _pick(self) -> int | None:
+        with self._guard:
+            order = [(self._next + k) % self.n_frames for k in range(self.n_frames)]
+            return next((i for i in order if i not in self.made), None)
+
+    def _run(self) -> None:
+        while not EXITING.is_set() and (i := self._pick()) is not None:
+            try:
+                self.make(i)
+            except Exception:  # the frame is simulated again when it is read, and raises there
+                return
+            with self._guard:
+                self.made.add(i)

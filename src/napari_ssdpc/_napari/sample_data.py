@@ -22,7 +22,6 @@ reads a stale file.
 
 from __future__ import annotations
 
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -264,11 +263,8 @@ def series_flat_white():
     return flat, white
 
 
-class SeriesPrefetch:
-    """Simulates (or reads from the cache) every frame of the series in a background thread.
-
-    It works onward from the last frame read (:meth:`asked`), wrapping round, so that the frames
-    after the one on screen are ready first; it stops when every frame is cached.
+class SeriesPrefetch(sample_cache.Prefetch):
+    """The time-series sample's frames simulated in the background (:class:`~.sample_cache.Prefetch`).
 
     Parameters
     ----------
@@ -276,38 +272,7 @@ class SeriesPrefetch:
     """
 
     def __init__(self, n_frames: int):
-        self.n_frames = int(n_frames)
-        self.made: set[int] = set()
-        self._next = 0
-        self._guard = threading.Lock()
-        self.thread = threading.Thread(target=self._run, name="ssdpc series prefetch", daemon=True)
-        sample_cache.BACKGROUND.append(self.thread)
-        self.thread.start()
-
-    def asked(self, i: int) -> None:
-        """Frame ``i`` was read: go on from the frame after it.
-
-        Parameters
-        ----------
-        i : int
-            The frame read.
-        """
-        with self._guard:
-            self._next = (int(i) + 1) % self.n_frames
-
-    def _pick(self) -> int | None:
-        with self._guard:
-            order = [(self._next + k) % self.n_frames for k in range(self.n_frames)]
-            return next((i for i in order if i not in self.made), None)
-
-    def _run(self) -> None:
-        while not sample_cache.EXITING.is_set() and (i := self._pick()) is not None:
-            try:
-                series_frame(i, self.n_frames)
-            except Exception:  # the frame is simulated again when it is read, and raises there
-                return
-            with self._guard:
-                self.made.add(i)
+        super().__init__(lambda i: series_frame(i, n_frames), n_frames)
 
 
 def series_array(n_frames: int = SERIES_FRAMES, prefetch: bool = True):

@@ -134,7 +134,7 @@ def fit_optics(
         progress=progress, should_stop=should_stop,
     )  # fmt: skip
     aberrations = pupil.aberrations(fitted.optics.aberrations).to_dict()
-    medium = beads.config.optics.medium_index  # the pupil holds for samples in the beads' medium
-    optics_with = fitted.optics.replace(medium_index=medium, aberrations=aberrations)
+    # the pupil holds for samples in the beads' medium
+    optics_with = fitted.optics.replace(medium_index=pupil.medium_index, aberrations=aberrations)
     fitted = dataclasses.replace(fitted, optics=optics_with, optics_fit={**fitted.optics_fit, "pupil": pupil.to_dict()})
     return OpticsFit(fitted, condenser, focus, pupil)

@@ -272,7 +272,7 @@ def fit_pupil(
     best, again = None, True
     while starts:
         start_z, defocus = starts.pop(0)
-        start = cal if defocus is None and start_z is base_z else with_pupil(cal, start_z, keys, defocus)
+        start = cal if defocus is None else with_pupil(cal, start_z, keys, defocus)
         rec = Reconstructor(config, start, flat=flat)
         views, _ = rec.views.measure(frame, name)
         dn, noise = first_answer(rec, views, should_stop=should_stop)
