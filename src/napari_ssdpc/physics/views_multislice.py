@@ -264,12 +264,18 @@ class ViewsMultislice(ViewsAdjoint):
         self._kernels = None
 
     # --------------------------------------------------------------------------- forward
-    def _screens(self, dn):
-        """exp(i κ Δn) of every voxel, in propagation order (far side first), (Z, n, n)."""
-        dn = self.xp.asarray(dn, self.rdtype)
+    def _screens(self, dn, skip_empty: bool = False):
+        """exp(i κ Δn) of every voxel, in propagation order (far side first), (Z, n, n); with
+        ``skip_empty`` a list with None for the planes of Δn 0 (a screen of 1: the forward pass
+        propagates across them in one step)."""
+        xp = self.xp
+        dn = xp.asarray(dn, self.rdtype)
         if dn.shape != self.shape:
             raise SsdpcError(f"Δn volume of shape {tuple(dn.shape)}; the model takes {self.shape}")
-        return self.xp.exp((1j * self.kappa) * dn[::-1]).astype(self.cdtype)
+        if not skip_empty:
+            return xp.exp((1j * self.kappa) * dn[::-1]).astype(self.cdtype)
+        filled = self.bk.to_host(xp.any(dn[::-1] != 0, axis=(1, 2)))
+        return [xp.exp((1j * self.kappa) * d).astype(self.cdtype) if f else None for d, f in zip(dn[::-1], filled)]
 
     def _chunks(self):
         return [slice(s, min(s + self.chunk, self.n_sources)) for s in range(0, self.n_sources, self.chunk)]
@@ -337,7 +343,7 @@ class ViewsMultislice(ViewsAdjoint):
         """Σ_j s_jk |g_jk|² on the crop grid (K, m, m), and per chunk what the backward pass needs."""
         acc = self.xp.zeros((self.view_shape[0], self.m, self.m), self.rdtype)
         store = []
-        empty = None if keep or screens is None else [bool(self.xp.all(sc == 1)) for sc in screens]
+        empty = None if keep or screens is None else [sc is None or bool(self.xp.all(sc == 1)) for sc in screens]
         for sl in self._chunks():
             g, kept = self._propagate_chunk(screens, sl, keep, empty)
             acc += self.xp.einsum("jqk,jqkyx->kyx", self._wgt[sl], (g.real**2 + g.imag**2))
@@ -357,7 +363,7 @@ class ViewsMultislice(ViewsAdjoint):
         ndarray, (K, h, w), float32 (float64 with complex128 fields)
             1 where a view holds only direct light.
         """
-        acc, _ = self._intensity(self._screens(dn))
+        acc, _ = self._intensity(self._screens(dn, skip_empty=True))
         return self._interpolate(acc) / self._i0
 
     def crop(self, views):
