@@ -11,7 +11,8 @@ and the fit's time. Writes docs/pupil_fit_validation.json (with ``--condenser``,
 at NA 0.26 and 0.01 NA off axis: docs/pupil_fit_validation-condenser.json; with ``--only KIND``, one
 imperfection alone: ``sph`` the spherical aberration (``sph1`` twice as much: a one-wave
 coefficient), ``def`` the views' defocus, ``cond`` the condenser, ``lens`` the lenslets' centres and
-focal lengths off by up to 1 %: docs/pupil_fit_validation-KIND.json)
+focal lengths off by up to 1 %: docs/pupil_fit_validation-KIND.json; with ``--bead-ri`` the beads'
+index is given to the fit: ...-KIND-ri.json)
 and prints a Markdown table. With ``--cell``, a cell imaged by the same instrument too. With
 ``--pmma``, the instrument in oil (n 1.518) with all three imperfections: the pupil fitted to two
 6 µm PMMA beads (n 1.49, known) and the paper's 13 µm PMMA bead imaged by it on another frame,
@@ -146,6 +147,7 @@ def main():
     p.add_argument("--only", choices=sorted(ALONE), help="one imperfection alone instead")
     p.add_argument("--cell", action="store_true", help="also a cell imaged by the same instrument")
     p.add_argument("--pmma", action="store_true", help="in oil: fitted to PMMA beads, the 13 µm PMMA bead measured")
+    p.add_argument("--bead-ri", action="store_true", help="the beads' index given to the fit (as --pmma does)")
     args = p.parse_args()
     medium, beads = (OIL, PMMA_BEADS) if args.pmma else (MEDIUM, BEADS)
     nominal = val.paper_optics(0.25).replace(medium_index=medium)
@@ -166,7 +168,7 @@ def main():
     else:
         t0 = time.perf_counter()
         cfg = val.run_config(nominal, z=Z_UM, dz=1.0)
-        known = PMMA_RI if args.pmma else None
+        known = PMMA_RI if args.pmma else float(np.real(beads[0].n)) if args.bead_ri else None
         fit = fit_optics(cal, case.flat, nominal, case.white, beads=BeadFrame(cfg, case.frame, known, name))
         seconds = time.perf_counter() - t0
         print("\n".join(fit.report()), flush=True)
@@ -188,7 +190,9 @@ def main():
         out["cell"] = _cell(truth, runs, args.cache, name)
     if args.pmma:
         out["pmma"] = _pmma(truth, runs, args.cache, name)
-    (HERE / f"{name.replace('pf-two', 'pupil_fit_validation').replace('pf1', 'pupil_fit_validation')}.json").write_text(
+    out["bead_ri"] = known if not args.fitted else None
+    stem = name.replace("pf-two", "pupil_fit_validation").replace("pf1", "pupil_fit_validation")
+    (HERE / f"{stem}{'-ri' if args.bead_ri else ''}.json").write_text(
         json.dumps(out, indent=1, default=float)
     )
     print("\n| optics | integrated Δn / true (z −10, +15 µm) | centroid depth error (µm) | false Δn |")

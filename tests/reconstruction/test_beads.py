@@ -85,6 +85,19 @@ def test_a_bead_is_found_at_its_depth_size_and_index(found):
     assert b.first_answer_ratio == pytest.approx(0.5, abs=0.05)
 
 
+def test_beads_of_a_known_index_are_searched_over_size_and_depth(frame):
+    """The fit of the optics gives the beads' index: the search holds it (a start one wave of phase
+    off, with another Δn, is no longer among the starts) and finds the bead's size and depth."""
+    contrast, views, dn, z_um, optics = frame
+    optics = optics.replace(medium_index=1.333)
+    kw = {"noise": NOISE, "optics": optics, "settings": SETTINGS, "z_search_um": 5.0}
+    [b] = fit_beads(contrast, views, dn, z_um, delta_n=float(TRUTH[0, 4]), **kw)
+    assert b.delta_n == TRUTH[0, 4]
+    assert b.centre_um == pytest.approx(tuple(TRUTH[0, :3]), abs=0.5)
+    assert b.diameter_um == pytest.approx(2 * TRUTH[0, 3], rel=0.03)
+    assert b.explained and b.converged
+
+
 def test_no_objects_no_beads_and_no_noise_is_refused(frame):
     contrast, views, dn, z_um, optics = frame
     kw = {"optics": optics, "settings": SETTINGS}

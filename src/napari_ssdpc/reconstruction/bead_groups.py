@@ -18,6 +18,7 @@ from napari_ssdpc.reconstruction.bead_search import (
     COARSE,
     COARSE_DZ_UM,
     DN_LIMIT,
+    DN_STEPS,
     FINE_DZ_UM,
     FINE_STARTS,
     MIN_RADIUS_PX,
@@ -63,6 +64,9 @@ class GroupFit:
     total: int = 0
     done: int = 0
     previous: tuple[Bead, ...] = ()
+    #: Every bead's Δn, when known (the fit of the optics to beads of a given index): held, the
+    #: search over size and depth only
+    delta_n: float | None = None
 
     def _step(self, label: str, stages: int = 1) -> None:
         """``stages`` stages done: the progress bar moves on."""
@@ -84,7 +88,9 @@ class GroupFit:
         ``region``: the first try's, when already built."""
         for attempt in range(3):
             region = region or self._around(roi, start, dz, settings)
-            p, value, converged = local_fit(region, start, sign, self.iterations, self.z_range, self.should_stop)
+            p, value, converged = local_fit(
+                region, start, sign, self.iterations, self.z_range, self.should_stop, self.delta_n
+            )
             if region.covers(p) or attempt == 2:  # the last region is kept: its views are the ones fitted
                 break
             start, region = p, None
@@ -103,7 +109,11 @@ class GroupFit:
         list of Bead
             In the order of ``cands`` (or of the previous frame's beads they started from).
         """
+        if self.delta_n is not None:
+            cands = cands.copy()
+            cands[:, 4] = self.delta_n
         sign = np.where(cands[:, 4] < 0, -1.0, 1.0)
+        dn_steps = DN_STEPS if self.delta_n is None else (abs(self.delta_n),)
         reach = RADIUS_STEPS[-1] * cands[:, 3]
         x0, x1 = np.min(cands[:, 0] - reach), np.max(cands[:, 0] + reach)
         y0, y1 = np.min(cands[:, 1] - reach), np.max(cands[:, 1] + reach)
@@ -124,7 +134,7 @@ class GroupFit:
         # scans each again with the others where the first round put them
         order = [b for _ in range(1 if len(spheres) == 1 else ROUNDS) for b in range(len(spheres))]
         for b in order:
-            found = scan_starts(coarse, spheres, b, self.z_search_um, sign[b], self.z_range)
+            found = scan_starts(coarse, spheres, b, self.z_search_um, sign[b], self.z_range, dn_steps)
             self._step("beads: scanning depth, size and index")
             fits = [self._local(roi, p, sign, COARSE_DZ_UM, coarse_settings) for _, p in distinct_starts(found, STARTS)]
             fits.sort(key=lambda a: a[1])
@@ -132,7 +142,8 @@ class GroupFit:
             self._step("beads: coarse fit")
         if len(spheres) > 1:
             # beads on one axis: the minima one wave of phase away, moved together
-            found = wave_neighbours(coarse, spheres, sign, self.optics.wavelength_um, self.z_range)
+            waves = (-1, 0, 1) if self.delta_n is None else (0,)
+            found = wave_neighbours(coarse, spheres, sign, self.optics.wavelength_um, self.z_range, waves)
             starts = distinct_starts(found, STARTS, exclude=[f[0] for f in fits])
             fits += [self._local(roi, p, sign, COARSE_DZ_UM, coarse_settings) for _, p in starts]
             fits.sort(key=lambda a: a[1])

@@ -153,7 +153,9 @@ class BeadRegion:
         return np.asarray(self.model.bk.to_host(per), float)
 
 
-def local_fit(region: BeadRegion, spheres, sign: np.ndarray, iterations: int, z_range, should_stop=None):
+def local_fit(
+    region: BeadRegion, spheres, sign: np.ndarray, iterations: int, z_range, should_stop=None, fixed_dn=None
+):
     """L-BFGS-B from the given spheres, each with its sign of Δn held and its centre within the volume.
 
     Parameters
@@ -169,6 +171,8 @@ def local_fit(region: BeadRegion, spheres, sign: np.ndarray, iterations: int, z_
         The depths a centre may take, µm (the volume's first and last plane).
     should_stop : callable, optional
         True stops the fit (:class:`Stopped`).
+    fixed_dn : float, optional
+        Every sphere's Δn, when known (held at it).
 
     Returns
     -------
@@ -184,6 +188,7 @@ def local_fit(region: BeadRegion, spheres, sign: np.ndarray, iterations: int, z_
     bounds = []
     for s in sign:
         dn_bounds = (0.0, DN_LIMIT) if s > 0 else (-DN_LIMIT, 0.0)
+        dn_bounds = dn_bounds if fixed_dn is None else (fixed_dn, fixed_dn)
         bounds += [(None, None)] * 2 + [tuple(z_range), (radius_min, None), tuple(v / SCALE[4] for v in dn_bounds)]
 
     # stop when an iteration lowers the misfit by less than a tenth of a noise variance over all data
@@ -267,7 +272,7 @@ def _within(z, z_range) -> np.ndarray:
     return (np.asarray(z) >= z_range[0]) & (np.asarray(z) <= z_range[1])
 
 
-def scan_starts(region: BeadRegion, spheres, b: int, z_search_um: float, sign: float, z_range):
+def scan_starts(region: BeadRegion, spheres, b: int, z_search_um: float, sign: float, z_range, dn_steps=DN_STEPS):
     """Starts for sphere ``b`` (the others held): radius x Δn at its depth, depth for the best three,
     radius x Δn again at the best depth on finer radii; every (misfit, spheres) tried.
 
@@ -288,6 +293,8 @@ def scan_starts(region: BeadRegion, spheres, b: int, z_search_um: float, sign: f
         Sign of its Δn.
     z_range : (float, float)
         The depths a centre may take, µm (the volume's first and last plane).
+    dn_steps : sequence of float
+        The |Δn| tried (:data:`DN_STEPS`; the beads' own when it is known).
 
     Returns
     -------
@@ -303,7 +310,7 @@ def scan_starts(region: BeadRegion, spheres, b: int, z_search_um: float, sign: f
         return region.misfit(p), p
 
     def grid(z, radii):
-        return [at(z, max(f * r0, radius_min), sign * d) for f in radii for d in DN_STEPS]
+        return [at(z, max(f * r0, radius_min), sign * d) for f in radii for d in dn_steps]
 
     found = grid(z0, RADIUS_STEPS)
     depths = z0 + np.arange(-z_search_um, z_search_um + 1e-9, Z_STEP_UM)
@@ -313,7 +320,7 @@ def scan_starts(region: BeadRegion, spheres, b: int, z_search_um: float, sign: f
     return found + grid(best[b, 2], RADIUS_FINE)
 
 
-def wave_neighbours(region: BeadRegion, spheres, sign, wavelength_um: float, z_range):
+def wave_neighbours(region: BeadRegion, spheres, sign, wavelength_um: float, z_range, waves=(-1, 0, 1)):
     """Starts one wave of phase away: each sphere's Δn one wave through its centre down, kept or up,
     with its depth moved by :data:`WAVE_DEPTHS_UM`; every combination for two spheres, one sphere at
     a time (the others held) for more.
@@ -335,6 +342,8 @@ def wave_neighbours(region: BeadRegion, spheres, sign, wavelength_um: float, z_r
         λ / 2R of Δn.
     z_range : (float, float)
         The depths a centre may take, µm.
+    waves : sequence of int
+        The waves of phase each Δn moves by ((0,): Δn known, the depths only).
 
     Returns
     -------
@@ -344,7 +353,7 @@ def wave_neighbours(region: BeadRegion, spheres, sign, wavelength_um: float, z_r
     options = []
     for s, sg in zip(spheres, sign, strict=True):
         wave = wavelength_um / (2 * s[3])
-        dns = [s[4] + k * wave for k in (-1, 0, 1)]
+        dns = [s[4] + k * wave for k in waves]
         options.append([(s[2] + dz, dn) for dn in dns if 0 < sg * dn <= DN_LIMIT for dz in WAVE_DEPTHS_UM])
     if len(spheres) == 2:
         trials = [np.array(c) for c in itertools.product(*options)]

@@ -67,6 +67,7 @@ def fit_beads(
     iterations: int = 60,
     previous: Sequence[Bead] = (),
     max_elongation: float | None = None,
+    delta_n: float | None = None,
     backend=None,
     progress=None,
     should_stop=None,
@@ -109,6 +110,9 @@ def fit_beads(
         Objects of the first answer whose footprint is more elongated than this (its long axis over
         its short one) are not taken for beads (a sphere's footprint is round), unless their
         footprint's radius is under :data:`SHAPE_MIN_RADIUS_PX` pixels; None: every object.
+    delta_n : float, optional
+        Every bead's Δn, when known (beads of a given index, as in the fit of the optics): held, and
+        the search is over size and depth alone (a bead one wave of phase off has another Δn).
     backend : {'cpu', 'gpu'} or Backend, optional
     progress : callable, optional
         ``progress(done, total, label)`` after each stage (the scan, the coarse fit of every bead; the
@@ -147,6 +151,7 @@ def fit_beads(
         progress,
         total,
         previous=tuple(b for b in previous if not b.note),
+        delta_n=delta_n,
     )
     out: list[Bead] = []
     try:
