@@ -192,9 +192,7 @@ def main():
         out["pmma"] = _pmma(truth, runs, args.cache, name)
     out["bead_ri"] = known if not args.fitted else None
     stem = name.replace("pf-two", "pupil_fit_validation").replace("pf1", "pupil_fit_validation")
-    (HERE / f"{stem}{'-ri' if args.bead_ri else ''}.json").write_text(
-        json.dumps(out, indent=1, default=float)
-    )
+    (HERE / f"{stem}{'-ri' if args.bead_ri else ''}.json").write_text(json.dumps(out, indent=1, default=float))
     print("\n| optics | integrated Δn / true (z −10, +15 µm) | centroid depth error (µm) | false Δn |")
     print("| --- | --- | --- | --- |")
     for r in out["rows"]:

@@ -153,9 +153,7 @@ class BeadRegion:
         return np.asarray(self.model.bk.to_host(per), float)
 
 
-def local_fit(
-    region: BeadRegion, spheres, sign: np.ndarray, iterations: int, z_range, should_stop=None, fixed_dn=None
-):
+def local_fit(region: BeadRegion, spheres, sign: np.ndarray, iterations: int, z_range, should_stop=None, fixed_dn=None):
     """L-BFGS-B from the given spheres, each with its sign of Δn held and its centre within the volume.
 
     Parameters
@@ -220,7 +218,8 @@ class _Best:
     that lowered it by no more than ``ftol`` of its value (L-BFGS-B's own test of an iteration)."""
 
     def __init__(self, ftol: float):
-        self.ftol, self.value, self.spheres, self.stalls = ftol, math.inf, None, 0
+        self.ftol, self.value, self.stalls = ftol, math.inf, 0
+        self.spheres: np.ndarray | None = None
 
     def record(self, value: float, spheres) -> None:
         gain = self.value - value

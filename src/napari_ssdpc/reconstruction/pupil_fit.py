@@ -288,9 +288,7 @@ def fit_pupil(
         step("the beads under the start pupil")
         if not beads:
             raise SsdpcError(f"no bead found in {name}: give a frame of beads (its first answer holds no object)")
-        spheres = np.array(
-            [[*b.centre_um, b.diameter_um / 2, b.delta_n] for b in beads]
-        )
+        spheres = np.array([[*b.centre_um, b.diameter_um / 2, b.delta_n] for b in beads])
         view_keys = [(ln.row, ln.col) for ln in rec.views.lenslets]
         d0 = np.array([rec.optics.aberrations.lenslet(*k).defocus_waves for k in view_keys], float)
         job = BeadsAndPupil(rec.views, views, spheres, settings, noll, start_z, d0, rec.backend)
