@@ -24,3 +24,18 @@ def test_a_new_stage_is_named_and_restarts_the_bar(monkeypatch):
         assert (bar.n, name(bar)) == (7, "refinement (multislice)")
         update(2, 10)  # another total: the bar restarts
         assert (bar.n, bar.total) == (2, 10)
+
+
+def test_a_new_stage_is_drawn_with_its_count_at_once(monkeypatch):
+    """A stage that starts with work already done (the bead fit's coarse fit after its scan) reads
+    1/3 at once, not 0/3 until the bar's next redraw (10 s in a log file, minutes for a bead fit)."""
+    import io
+
+    out = io.StringIO()
+    monkeypatch.setattr(progress.sys, "stderr", out)
+    with progress.tqdm_callback("refinement", unit="stage") as update:
+        update(0, 3, "beads: scanning")
+        update(1, 3, "beads: scanning")
+        update(1, 3, "beads: coarse fit")
+        drawn = out.getvalue().split("\r")[-1]
+    assert "beads: coarse fit" in drawn and "1/3" in drawn, drawn

@@ -44,13 +44,16 @@ def tqdm_callback(desc: str, unit: str = "step", disable: bool = False):
 
     def update(done, total, label="", *_):
         nonlocal stage
-        if label and label != stage:  # a new stage of the work (e.g. "TV", then "multislice")
+        restart = bool(label) and label != stage
+        if restart:  # a new stage of the work (e.g. "TV", then "multislice")
             stage = label
             bar.set_description(f"{desc} ({label})", refresh=False)
             bar.reset(total=total)
         elif bar.total != total:
             bar.reset(total=total)
         bar.update(done - bar.n)
+        if restart:  # shown at once with its count (the bar's own redraws wait for its interval)
+            bar.refresh()
 
     try:
         yield update

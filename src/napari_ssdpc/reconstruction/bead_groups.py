@@ -68,6 +68,11 @@ class GroupFit:
     #: search over size and depth only
     delta_n: float | None = None
 
+    def _start(self, label: str) -> None:
+        """A stage begins: the progress bar names it, with the stages done so far."""
+        if self.progress is not None:
+            self.progress(self.done, self.total, label)
+
     def _step(self, label: str, stages: int = 1) -> None:
         """``stages`` stages done: the progress bar moves on."""
         self.done += stages
@@ -120,6 +125,8 @@ class GroupFit:
         side = max(x1 - x0, y1 - y0) + 2 * self.settings.roi_margin_um
         roi = square_roi(self.measurements.x_um, self.measurements.y_um, ((x0 + x1) / 2, (y0 + y1) / 2), side)
         depth = self.z_search_um + reach.max() + COARSE_DZ_UM
+        if self.previous:
+            self._start("beads: fitted from the previous frame's")
         warm = self._warm(roi, cands)
         if warm is not None:
             self._step("beads: fitted from the previous frame's", stages(len(cands)))
@@ -134,14 +141,17 @@ class GroupFit:
         # scans each again with the others where the first round put them
         order = [b for _ in range(1 if len(spheres) == 1 else ROUNDS) for b in range(len(spheres))]
         for b in order:
+            self._start("beads: scanning depth, size and index")
             found = scan_starts(coarse, spheres, b, self.z_search_um, sign[b], self.z_range, dn_steps)
             self._step("beads: scanning depth, size and index")
+            self._start("beads: coarse fit")
             fits = [self._local(roi, p, sign, COARSE_DZ_UM, coarse_settings) for _, p in distinct_starts(found, STARTS)]
             fits.sort(key=lambda a: a[1])
             spheres = fits[0][0]
             self._step("beads: coarse fit")
         if len(spheres) > 1:
             # beads on one axis: the minima one wave of phase away, moved together
+            self._start("beads: one wave of phase away")
             waves = (-1, 0, 1) if self.delta_n is None else (0,)
             found = wave_neighbours(coarse, spheres, sign, self.optics.wavelength_um, self.z_range, waves)
             starts = distinct_starts(found, STARTS, exclude=[f[0] for f in fits])
@@ -150,6 +160,7 @@ class GroupFit:
             self._step("beads: one wave of phase away")
         # the coarse model's error can rank the minimum one 2π of phase away first: the best two are
         # ranked again on the full model (one pass each), and the better is fitted there
+        self._start("beads: full fit")
         last = distinct_starts([(f[1], f[0]) for f in fits], FINE_STARTS)
         ranked = [(self._around(roi, p, FINE_DZ_UM, self.settings), p) for _, p in last]
         region, best = min(ranked, key=lambda a: a[0].misfit(a[1]))
