@@ -96,7 +96,6 @@ def test_a_later_frame_fits_its_bead_from_the_previous_frames(refined, synthetic
     assert _mass_near(res) == pytest.approx(_mass_near(first), abs=0.02)
 
 
-
 def test_spheres_alone_within_twice_the_stop_are_kept(refined):
     """The spheres alone, every object a bead the fit vouched for, leave more than the stop (here
     4.2 x the noise for 3.4: the views were made on a larger region than the model's) but less than
