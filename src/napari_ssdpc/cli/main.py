@@ -164,7 +164,7 @@ def build_parser():
         action=argparse.BooleanOptionalAction,
         default=True,
         help=(
-            "also refine with --method multislice (about 12 min on 2 cores): ri_multislice.ome.tif, refined.png "
+            "also refine with --method multislice (about 7 min on 2 cores): ri_multislice.ome.tif, refined.png "
             "(default: yes)"
         ),
     )

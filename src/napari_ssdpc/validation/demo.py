@@ -55,7 +55,7 @@ def run_demo(
     dz : float
         Plane spacing, µm.
     refine : bool
-        Also refine the answer with the multislice model (``method: multislice``, about 12 minutes
+        Also refine the answer with the multislice model (``method: multislice``, about 7 minutes
         more): ``ri_multislice.ome.tif`` and ``refined.png``, both methods side by side.
 
     Returns
