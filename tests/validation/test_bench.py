@@ -128,3 +128,15 @@ def test_series_rows_of_the_warm_started_method(data):
     report["targets"] = _targets(report)
     text = format_report(report)
     assert "tv warm-started, NA 0.25, moving sample" in text and "tv warm-started" in text.splitlines()[-1]
+
+
+def test_a_kept_start_reports_no_iteration_time():
+    """A multislice frame whose start was kept ran no iteration: no time per iteration (nor a whole
+    field's estimate from it) is made up from the frame's other work."""
+    from napari_ssdpc.validation.bench import multislice_fit_words
+
+    stage = {"iterations": 0, "iteration_s": None, "roi_um": 37.2, "model_planes": 61, "whole_field_iteration_s": None}
+    assert multislice_fit_words(stage) == "no iteration (its start kept as it is) in 37 µm x 61 planes"
+    stage |= {"iterations": 3, "iteration_s": 2.5, "whole_field_iteration_s": 120.0}
+    words = multislice_fit_words(stage)
+    assert words.startswith("3 iterations of 2.5 s in 37 µm x 61 planes (the whole field: about 120 s")

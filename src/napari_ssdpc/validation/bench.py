@@ -324,11 +324,13 @@ def _multislice_iterations(stage: dict, result, say) -> None:
     z0, z1 = s["multislice_z_um"]
     planes = int(round((z1 - z0) / result.voxel_um[0])) + 1
     ny, nx = result.delta_n.shape[1:]
-    # a model iteration costs about (pixels) x (planes): the whole field and z range, scaled
-    whole = seconds / max(its, 1) * (ny * nx) / ((r1 - r0) * (c1 - c0)) * len(result.z_um) / planes
+    # a model iteration costs about (pixels) x (planes): the whole field and z range, scaled; none
+    # when the start was kept as it is (no iteration ran)
+    per = seconds / its if its else None
+    whole = None if per is None else per * (ny * nx) / ((r1 - r0) * (c1 - c0)) * len(result.z_um) / planes
     stage.update(
         iterations=its,
-        iteration_s=seconds / max(its, 1),
+        iteration_s=per,
         fit_s=seconds,
         roi_um=(r1 - r0) * result.voxel_um[1],
         model_planes=planes,
@@ -336,9 +338,29 @@ def _multislice_iterations(stage: dict, result, say) -> None:
         residual_over_noise=s["multislice_residual_over_noise"],
         whole_field_iteration_s=whole,
     )
-    say(
-        f"  {its} iterations of {stage['iteration_s']:.1f} s in {stage['roi_um']:.0f} µm x {planes} planes, "
-        f"{stage['frame_s']:.0f} s a frame (the whole field: about {whole:.0f} s an iteration)"
+    say(f"  {multislice_fit_words(stage)}, {stage['frame_s']:.0f} s a frame")
+
+
+def multislice_fit_words(stage: dict) -> str:
+    """The multislice fit of a bench stage in words: its iterations, their time, its region and the
+    whole field's estimate, or that its start was kept as it is.
+
+    Parameters
+    ----------
+    stage : dict
+        ``iterations``, ``iteration_s`` (None: no iteration ran), ``roi_um``, ``model_planes``,
+        ``whole_field_iteration_s``.
+
+    Returns
+    -------
+    str
+    """
+    where = f"in {stage['roi_um']:.0f} µm x {stage['model_planes']} planes"
+    if stage["iteration_s"] is None:
+        return f"no iteration (its start kept as it is) {where}"
+    return (
+        f"{stage['iterations']} iterations of {stage['iteration_s']:.1f} s {where} "
+        f"(the whole field: about {stage['whole_field_iteration_s']:.0f} s an iteration)"
     )
 
 

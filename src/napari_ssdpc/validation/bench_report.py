@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from napari_ssdpc.reconstruction.methods import METHODS
-from napari_ssdpc.validation.bench import TV_NA
+from napari_ssdpc.validation.bench import TV_NA, multislice_fit_words
 
 __all__ = ["format_report"]
 
@@ -207,9 +207,7 @@ def format_report(report) -> str:
         ms = st["multislice_case"]
         lines[-1] += (
             f"; multislice {t['multislice_frame_s']:.0f} s a frame (<= 20: {t['multislice_frame_ok']}), "
-            f"{ms['iterations']} iterations of {ms['iteration_s']:.1f} s in {ms['roi_um']:.0f} µm x "
-            f"{ms['model_planes']} planes, residual {ms['residual_over_noise']:.1f} x the noise "
-            f"(whole field: about {ms['whole_field_iteration_s']:.0f} s an iteration)"
+            f"{multislice_fit_words(ms)}, residual {ms['residual_over_noise']:.1f} x the noise"
         )
     if "multislice_warm_frame_ok" in t:
         lines[-1] += (
