@@ -5,8 +5,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from napari_ssdpc.reconstruction import bead_search
-from napari_ssdpc.reconstruction.bead_search import local_fit
+from napari_ssdpc.reconstruction import bead_local_fit
+from napari_ssdpc.reconstruction.bead_local_fit import local_fit
 
 MINIMUM = np.array([[0.3, -0.2, 1.1, 2.4, 0.05]])  # x, y, z, R (µm), Δn
 START = MINIMUM + np.array([[0.4, -0.3, 1.5, -0.5, 0.01]])
@@ -31,14 +31,14 @@ class Float32Quadratic:
 
 
 def fitted(monkeypatch, patience):
-    monkeypatch.setattr(bead_search, "PATIENCE", patience)
+    monkeypatch.setattr(bead_local_fit, "PATIENCE", patience)
     region = Float32Quadratic()
     spheres, value, converged = local_fit(region, START, np.array([1.0]), 60, (-10.0, 10.0))
     return spheres, value, converged, region.evaluations
 
 
 def test_a_fit_at_its_misfits_resolution_stops(monkeypatch):
-    stopped = fitted(monkeypatch, bead_search.PATIENCE)
+    stopped = fitted(monkeypatch, bead_local_fit.PATIENCE)
     probing = fitted(monkeypatch, 10_000)  # no stop: L-BFGS-B's own tests only
     np.testing.assert_allclose(stopped[0], MINIMUM, atol=3e-4)  # x, y, z, R within 0.3 nm; Δn within 3e-4
     np.testing.assert_allclose(stopped[0], probing[0], atol=1e-6)  # the same point

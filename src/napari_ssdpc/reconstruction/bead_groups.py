@@ -14,6 +14,7 @@ import numpy as np
 
 from napari_ssdpc.physics.multislice_source import square_roi
 from napari_ssdpc.reconstruction.bead import Bead
+from napari_ssdpc.reconstruction.bead_local_fit import local_fit
 from napari_ssdpc.reconstruction.bead_search import (
     COARSE,
     COARSE_DZ_UM,
@@ -27,7 +28,6 @@ from napari_ssdpc.reconstruction.bead_search import (
     STARTS,
     BeadRegion,
     distinct_starts,
-    local_fit,
     scan_starts,
     wave_neighbours,
 )

@@ -12,9 +12,12 @@ near zero.
 
 from __future__ import annotations
 
+import math
+import time
+
 import numpy as np
 
-__all__ = ["rest_views"]
+__all__ = ["rest_views", "with_rest"]
 
 
 def rest_views(views, view_mask, predicted, region) -> np.ndarray:
@@ -40,3 +43,41 @@ def rest_views(views, view_mask, predicted, region) -> np.ndarray:
     out = np.array(views, np.float32, copy=True)
     out[:, rows, cols] -= np.asarray(predicted, np.float32) - 1.0
     return out * np.asarray(view_mask, np.float32)
+
+
+def with_rest(setup, tv, views, dn, region, predicted, sign: str, progress=None, should_stop=None):
+    """The frame's Δn: the region's fit, and 'tv' of what its model leaves in the views
+    (:func:`rest_views`) outside the region and added inside it.
+
+    Parameters
+    ----------
+    setup : Setup
+        The method's optics, planes, views' front end and backend.
+    tv : TvMethod
+        The built 'tv' method of the frame (its operators).
+    views : ndarray, float32, (K, ny, nx)
+    dn : ndarray, (Z, ny, nx)
+        Δn with the region's fit in place.
+    region : (slice, slice)
+    predicted : ndarray, (K, h, w)
+        The model's views I / I0 of the region's Δn, on the backend (the report's).
+    sign : str
+        The sign the frame's 'tv' solve took.
+    progress, should_stop : callable, optional
+
+    Returns
+    -------
+    dn : ndarray, float32, (Z, ny, nx)
+    report : dict
+        ``multislice_rest_residual_over_noise`` and ``multislice_rest_seconds`` (s).
+    """
+    rows, cols = region
+    t0 = time.perf_counter()
+    rest = rest_views(views, setup.views.view_mask, setup.backend.to_host(predicted), region)
+    phase, rep = tv.rest(rest, sign, progress=progress, should_stop=should_stop)
+    out = phase * (setup.optics.wavelength_um / (2 * math.pi * setup.dz_um))  # Δn = λφ/(2π dz)
+    out[:, rows, cols] += dn[:, rows, cols]  # what the region's fit left unexplained is kept there too
+    return out, {
+        "multislice_rest_residual_over_noise": rep.residual_over_noise,
+        "multislice_rest_seconds": time.perf_counter() - t0,
+    }

@@ -56,7 +56,7 @@ from napari_ssdpc.reconstruction.multislice_region import (
 from napari_ssdpc.reconstruction.nonlinear import Fit, Unknowns, discrepancy_stop, projected_gradient
 from napari_ssdpc.reconstruction.proximal import bounds
 from napari_ssdpc.reconstruction.regularised import TvState
-from napari_ssdpc.reconstruction.rest_of_frame import rest_views
+from napari_ssdpc.reconstruction.rest_of_frame import with_rest
 from napari_ssdpc.reconstruction.sphere_start import sphere_starts
 
 __all__ = ["MultisliceMethod"]
@@ -339,40 +339,13 @@ class MultisliceMethod(PhaseMethod):
         return Solution((dn / to_dn).astype(np.float32), out, history, state=start.state)
 
     def _with_rest(self, views, dn, region, predicted, start: Solution, progress, should_stop):
-        """The frame's Δn: the region's fit, and 'tv' of what its model leaves in the views
-        (:mod:`~napari_ssdpc.reconstruction.rest_of_frame`) outside the region and added inside it.
-
-        Parameters
-        ----------
-        views : ndarray, float32, (K, ny, nx)
-        dn : ndarray, (Z, ny, nx)
-            Δn with the region's fit in place.
-        region : (slice, slice)
-        predicted : ndarray, (K, h, w)
-            The model's views I / I0 of the region's Δn, on the backend (the report's).
-        start : Solution
-            The frame's 'tv' solution (its sign).
-        progress, should_stop : callable, optional
-
-        Returns
-        -------
-        dn : ndarray, float32, (Z, ny, nx)
-            ``dn`` itself when ``multislice.rest_of_frame`` is off.
-        report : dict
-        """
+        """The frame's Δn and the report's keys with the rest of the frame solved
+        (:func:`~napari_ssdpc.reconstruction.rest_of_frame.with_rest`; ``dn`` itself when
+        ``multislice.rest_of_frame`` is off)."""
         s = self.setup
         if not s.settings.multislice.rest_of_frame:
             return dn, {}
-        rows, cols = region
-        t0 = time.perf_counter()
-        rest = rest_views(views, s.views.view_mask, s.backend.to_host(predicted), region)
-        phase, rep = self.tv.rest(rest, _sign_of(start), progress=progress, should_stop=should_stop)
-        out = phase * (s.optics.wavelength_um / (2 * math.pi * s.dz_um))  # Δn = λφ/(2π dz)
-        out[:, rows, cols] += dn[:, rows, cols]  # what the region's fit left unexplained is kept there too
-        return out, {
-            "multislice_rest_residual_over_noise": rep.residual_over_noise,
-            "multislice_rest_seconds": time.perf_counter() - t0,
-        }
+        return with_rest(s, self.tv, views, dn, region, predicted, _sign_of(start), progress, should_stop)
 
     def _model(self, rows: slice, cols: slice) -> ViewsMultislice:
         """The multislice model of the views on every plane of the output grid and the region (rows, cols):
