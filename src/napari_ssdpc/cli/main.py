@@ -25,6 +25,7 @@ from napari_ssdpc.cli.commands import (
     cmd_resign,
     cmd_simulate,
 )
+from napari_ssdpc.cli.dpc import add_dpc_command
 from napari_ssdpc.cli.fit_optics import add_fit_optics_command
 from napari_ssdpc.cli.measure import add_measure_command
 from napari_ssdpc.cli.options import add_reconstruction_options
@@ -174,6 +175,7 @@ def build_parser():
     s.set_defaults(func=cmd_demo)
     add_measure_command(sub)
     add_beads_command(sub)
+    add_dpc_command(sub)
     return p
 
 

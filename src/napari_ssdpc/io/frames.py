@@ -21,6 +21,7 @@ __all__ = [
     "TiffInfo",
     "complete_pages",
     "read_frame",
+    "read_stack",
     "tiff_info",
     "write_ome_tiff",
     "write_ome_tiffs",
@@ -164,14 +165,47 @@ def read_frame(path, *, allow_series: bool = True, name: str = "frame") -> np.nd
         Missing, unreadable, truncated, colour (RGB) or a reconstruction result.
     """
     path = Path(path)
+    data = np.squeeze(_read(path, name, _check_kind))
+    if data.ndim == 3 and not allow_series:
+        raise SsdpcError(f"{path}: holds {data.shape[0]} frames; give a single {name} (y, x)")
+    if data.ndim not in (2, 3):
+        raise SsdpcError(f"{path}: expected a 2D frame or a (t, y, x) series, got shape {data.shape}")
+    return data
+
+
+def read_stack(path, *, name: str = "stack") -> np.ndarray:
+    """Read an image stack of any shape (a DPC stack: patterns, focal planes, y, x) from a TIFF.
+
+    Parameters
+    ----------
+    path : str or Path
+        The TIFF or OME-TIFF file.
+    name : str
+        Its role, for the messages.
+
+    Returns
+    -------
+    numpy.ndarray
+        The file's images in its own order and shape, singleton axes dropped.
+
+    Raises
+    ------
+    SsdpcError
+        Missing, unreadable, truncated, colour (RGB) or a reconstruction result.
+    """
+    return np.squeeze(_read(Path(path), name, _check_not_result))
+
+
+def _read(path: Path, name: str, check) -> np.ndarray:
+    """A TIFF's images after ``check(info, path, name)``; every failure one line."""
     if path.is_dir():
         raise SsdpcError(f"{name} {path} is a folder; give a TIFF file")
     if not path.is_file():
         raise SsdpcError(f"file not found: {path} (check the path)")
     try:
         with tifffile.TiffFile(path) as tif:
-            _check_kind(_info(tif, path.stat().st_size), path, name)
-            data = tif.asarray()
+            check(_info(tif, path.stat().st_size), path, name)
+            return tif.asarray()
     except SsdpcError:
         raise
     except OSError as e:
@@ -180,28 +214,27 @@ def read_frame(path, *, allow_series: bool = True, name: str = "frame") -> np.nd
         raise SsdpcError(
             f"{path}: not a readable TIFF ({type(e).__name__}); give a complete TIFF or OME-TIFF {name}"
         ) from None
-    data = np.squeeze(data)
-    if data.ndim == 3 and not allow_series:
-        raise SsdpcError(f"{path}: holds {data.shape[0]} frames; give a single {name} (y, x)")
-    if data.ndim not in (2, 3):
-        raise SsdpcError(f"{path}: expected a 2D frame or a (t, y, x) series, got shape {data.shape}")
-    return data
 
 
-def _check_kind(info: TiffInfo, path: Path, name: str) -> None:
-    """Refuse colour images and ssdpc results given where a raw camera frame belongs."""
+def _check_not_result(info: TiffInfo, path: Path, name: str) -> None:
+    """Refuse colour images and ssdpc results given where camera images belong."""
     if info.samples > 1 or "S" in info.axes:
         raise SsdpcError(
-            f"{path}: a colour (RGB) image, not a raw camera frame; give the monochrome camera frame "
-            "(export it as greyscale TIFF without colour conversion)"
+            f"{path}: a colour (RGB) image, not camera images; give the monochrome camera images "
+            "(export them as greyscale TIFF without colour conversion)"
         )
     text = info.description
     if "napari-ssdpc" in text and "quantity" in text:
         what = next((q for q in ("refractive index", "phase", "absorption", "DPC") if q in text), "a volume")
         raise SsdpcError(
-            f"{path}: a reconstruction result ({what}) of `ssdpc reconstruct`, not a raw {name}; "
-            "give the camera frame the result was computed from"
+            f"{path}: a reconstruction result ({what}) of napari-ssdpc, not a {name} of camera images; "
+            "give the camera images the result was computed from"
         )
+
+
+def _check_kind(info: TiffInfo, path: Path, name: str) -> None:
+    """Refuse colour images, ssdpc results and z stacks given where a raw camera frame belongs."""
+    _check_not_result(info, path, name)
     if "Z" in info.axes:
         raise SsdpcError(
             f"{path}: a z stack (axes {info.axes}), not a raw camera {name}; give the light-field frame (y, x)"
@@ -256,17 +289,11 @@ def write_tiffs(files: dict, *, metadata=None, **kwargs) -> list[Path]:
 
 
 def _ome_meta(axes: str, voxel_um=None, description: dict | None = None) -> dict:
-    meta = {"axes": axes}
-    if voxel_um is not None:
-        dz, dy, dx = (float(v) for v in voxel_um)
-        meta.update(
-            PhysicalSizeZ=dz,
-            PhysicalSizeZUnit="µm",
-            PhysicalSizeY=dy,
-            PhysicalSizeYUnit="µm",
-            PhysicalSizeX=dx,
-            PhysicalSizeXUnit="µm",
-        )
+    meta: dict = {"axes": axes}
+    if voxel_um is not None:  # (dz, dy, dx), or (dy, dx) for a 2D image
+        for axis, size in zip("ZYX"[3 - len(voxel_um) :], voxel_um):
+            meta[f"PhysicalSize{axis}"] = float(size)
+            meta[f"PhysicalSize{axis}Unit"] = "µm"
     if description:
         meta["Description"] = json.dumps({"software": SOFTWARE, **description})
     return meta
@@ -284,7 +311,7 @@ def write_ome_tiff(path, data, *, axes: str, voxel_um=None, description: dict | 
     axes : str
         OME axes, like 'ZYX' or 'TZYX'.
     voxel_um : tuple of float, optional
-        (dz, dy, dx) in µm.
+        (dz, dy, dx) in µm, or (dy, dx) for a 2D image.
     description : dict, optional
         Stored as JSON in the OME metadata.
 

@@ -40,9 +40,11 @@ from napari_ssdpc.settings.optics import Optics
 
 __all__ = [
     "LensletSetup",
+    "fft_indices",
     "lenslet_transfer_functions",
     "paper_transfer_functions",
     "weak_object_transfer_functions",
+    "zero_padded",
 ]
 
 
@@ -83,10 +85,10 @@ def weak_object_transfer_functions(source, pupil, z_um=0.0, eta=None, out_shape=
         raise SsdpcError("the source is empty; give a source with positive power (condenser_na > 0)")
     out_shape = tuple(s.shape[-2:]) if out_shape is None else tuple(out_shape)
     pad = tuple(sfft.next_fast_len(m + n) for m, n in zip(s.shape[-2:], out_shape))
-    s_pad = _embed(s, pad)
-    p_pad = _embed(p, pad)
-    eta_pad = None if eta is None else _embed(np.broadcast_to(eta, s.shape), pad)
-    iy, ix = (_fft_indices(n) for n in out_shape)
+    s_pad = zero_padded(s, pad)
+    p_pad = zero_padded(p, pad)
+    eta_pad = None if eta is None else zero_padded(np.broadcast_to(eta, s.shape), pad)
+    iy, ix = (fft_indices(n) for n in out_shape)
     h_abs, h_phase = [], []
     for z in zs:
         q = p_pad if z == 0 else p_pad * np.exp(2j * np.pi * z * eta_pad)
@@ -101,15 +103,37 @@ def weak_object_transfer_functions(source, pupil, z_um=0.0, eta=None, out_shape=
     return np.stack(h_abs), np.stack(h_phase)
 
 
-def _fft_indices(n):
-    """Integer frequency indices of an unshifted FFT axis of length n."""
+def fft_indices(n: int) -> np.ndarray:
+    """Integer frequency indices of an unshifted FFT axis.
+
+    Parameters
+    ----------
+    n : int
+        The axis' length.
+
+    Returns
+    -------
+    ndarray of int, (n,)
+        0, 1, ..., then the negative indices.
+    """
     return np.rint(sfft.fftfreq(n) * n).astype(int)
 
 
-def _embed(a, shape):
-    """Zero-pad an unshifted-order array into a larger unshifted-order grid (last two axes)."""
-    iy = _fft_indices(a.shape[-2]) % shape[0]
-    ix = _fft_indices(a.shape[-1]) % shape[1]
+def zero_padded(a, shape) -> np.ndarray:
+    """An unshifted-order array zero-padded into a larger unshifted-order grid (last two axes).
+
+    Parameters
+    ----------
+    a : ndarray, (..., my, mx)
+    shape : (int, int)
+        The larger grid (ny, nx).
+
+    Returns
+    -------
+    ndarray, (..., ny, nx)
+    """
+    iy = fft_indices(a.shape[-2]) % shape[0]
+    ix = fft_indices(a.shape[-1]) % shape[1]
     out = np.zeros(a.shape[:-2] + tuple(shape), dtype=a.dtype)
     out[..., iy[:, None], ix[None, :]] = a
     return out
@@ -220,7 +244,7 @@ class LensletSetup:
         fine = tuple(m * r for m in m_out)
         h_abs, h_phase = weak_object_transfer_functions(self.src, self.pup, zs, self.eta, fine, self.norm)
         if r > 1:  # the fine samples at multiples of r are the output grid
-            iy, ix = ((_fft_indices(m) * r) % f for m, f in zip(m_out, fine))
+            iy, ix = ((fft_indices(m) * r) % f for m, f in zip(m_out, fine))
             h_abs, h_phase = (h[..., iy[:, None], ix[None, :]] for h in (h_abs, h_phase))
         h_abs[..., 0, 0] = 2 * self.i0
         return h_abs, h_phase
@@ -238,7 +262,7 @@ class LensletSetup:
         ndarray, complex64, (..., ny, nx)
             On the image grid, unshifted FFT order.
         """
-        return h if h.shape[-2:] == self.shape else _embed(h, self.shape)
+        return h if h.shape[-2:] == self.shape else zero_padded(h, self.shape)
 
 
 def _binary_background(src, pupil, norm):
@@ -273,8 +297,8 @@ def paper_transfer_functions(optics: Optics, shape, pixel_um, z_um=0.0):
     du = _frequency_steps(shape, pixel_um)
     r = optics.cutoff
     m_in = tuple(2 * int(math.ceil(r / d)) + 4 for d in du)
-    fy = (_fft_indices(m_in[0]) * du[0])[:, None]
-    fx = (_fft_indices(m_in[1]) * du[1])[None, :]
+    fy = (fft_indices(m_in[0]) * du[0])[:, None]
+    fx = (fft_indices(m_in[1]) * du[1])[None, :]
     step = math.sqrt(du[0] * du[1])
     cx, cy = optics.source_centre
     disk = soft_disk(np.hypot(fx - cx, fy - cy), optics.source_radius, step)

@@ -19,6 +19,7 @@ from napari_ssdpc.calibration.result import Calibration
 from napari_ssdpc.calibration.views import ViewSampler, view_grid
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.physics import transfer
+from napari_ssdpc.physics.design import design
 from napari_ssdpc.physics.views_multislice import ViewsMultislice
 from napari_ssdpc.reconstruction import checks, consistency
 from napari_ssdpc.reconstruction.forward import ViewModel
@@ -140,6 +141,11 @@ class ViewContrast:
     def direct_light(self) -> np.ndarray:
         """Each lit view's direct light (the flat's median, or the model's I0_k), (K_lit,)."""
         return self.level[self.lit]
+
+    @property
+    def axial_resolution_um(self) -> float:
+        """How far apart two planes the views tell apart, µm (R_z of paper Eq. 13 with tanθ = √2·d/f_fl)."""
+        return float(design(self.optics)["r_z_ffl_um"])
 
     def linear_model(self, z_um, *, backend=None, progress=None) -> ViewModel:
         """The first-order model of the lit views (paper Eqs. 2-4): each lenslet's sub-aperture.

@@ -50,6 +50,11 @@ class Measurements(Protocol):
         """Each view's measured direct light, (K,)."""
         ...
 
+    @property
+    def axial_resolution_um(self) -> float:
+        """How far apart two planes the views tell apart, µm (what an iterative method pads its planes by)."""
+        ...
+
     def linear_model(self, z_um, *, backend: str | Backend | None = None, progress=None) -> Any:
         """The first-order model of the views (a ``ViewModel``).
 

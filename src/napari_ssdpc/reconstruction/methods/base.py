@@ -11,6 +11,7 @@ import numpy as np
 from napari_ssdpc.backend import Backend
 from napari_ssdpc.errors import Cancelled
 from napari_ssdpc.reconstruction.measurements import Measurements
+from napari_ssdpc.settings.dpc_optics import DpcOptics
 from napari_ssdpc.settings.optics import Optics
 from napari_ssdpc.settings.reconstruction import ReconstructionSettings
 
@@ -23,7 +24,8 @@ class Setup:
 
     Attributes
     ----------
-    optics : Optics
+    optics : Optics or DpcOptics
+        The instrument of the front end (a method reads its wavelength).
     settings : ReconstructionSettings
         The method reads its own section (``settings.tv``, ``settings.wotf``, ...).
     views : Measurements
@@ -35,7 +37,7 @@ class Setup:
         NumPy on the CPU or CuPy on a GPU.
     """
 
-    optics: Optics
+    optics: Optics | DpcOptics
     settings: ReconstructionSettings
     views: Measurements
     z_um: np.ndarray

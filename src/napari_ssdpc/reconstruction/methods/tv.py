@@ -14,7 +14,6 @@ import weakref
 import numpy as np
 
 from napari_ssdpc.errors import SsdpcWarning
-from napari_ssdpc.physics.design import design
 from napari_ssdpc.reconstruction.forward import padded_planes
 from napari_ssdpc.reconstruction.methods.base import PhaseMethod, Setup, Solution
 from napari_ssdpc.reconstruction.methods.wotf import contrast_of, view_model
@@ -83,7 +82,7 @@ class TvMethod(PhaseMethod):
     def _build(cls, setup, progress):
         # one model of the views on the z grid padded by about R_z on each side; the Tikhonov
         # inverse of its output planes gives the start
-        r_z = float(design(setup.optics)["r_z_ffl_um"])
+        r_z = float(setup.views.axial_resolution_um)
         zs, planes = padded_planes(setup.z_um, r_z)
         model = view_model(setup, zs, progress)
         wotf = WotfInversion(model.planes(planes), setup.settings.tv.alpha)
@@ -121,7 +120,7 @@ class TvMethod(PhaseMethod):
         history = {"tv": {"objective": report.objective, "relative_change": report.relative_change}}
         out = report.to_dict()
         out["tv_phase_through_rad"] = through = float(np.abs(np.asarray(phi).sum(axis=0)).max())
-        if self.setup.settings.method == "tv" and through > STRONG_PHASE_RAD:
+        if self.setup.settings.method == "tv" and through > STRONG_PHASE_RAD and len(self.setup.z_um) > 1:
             warnings.warn(
                 f"an object delays the light by {through:.1f} rad (more than {STRONG_PHASE_RAD} rad) and the "
                 f"first-order model leaves {report.residual_over_noise:.0f} x the noise unexplained: 'tv' "
