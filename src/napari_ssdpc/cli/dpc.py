@@ -43,7 +43,7 @@ def add_dpc_command(sub) -> None:
         choices=("auto", "denser", "lighter", "any"),
         help="tv: the sign of Δn against the medium (default: any for 2D, auto for a z-stack)",
     )
-    s.add_argument("--iterations", type=int, help="tv: most iterations (default 60)")
+    s.add_argument("--iterations", type=int, help="tv: most iterations (default 60, 200 for a z-stack)")
     s.add_argument("--z-min-um", type=float, help="3D: first plane, µm (default: the stack's first focal plane)")
     s.add_argument("--z-max-um", type=float, help="3D: last plane, µm (default: the stack's last focal plane)")
     s.add_argument("--dz-um", type=float, help="3D: plane spacing, µm (default: the stack's own spacing)")
