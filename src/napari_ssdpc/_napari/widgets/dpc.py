@@ -33,7 +33,7 @@ class DpcWidget(StepWidget):
         self.optics = FileEdit(
             label="DPC optics",
             filter="*.yaml *.yml *.json",
-            tooltip="the DPC optics file: wavelength, NAs, magnification, camera pixel, patterns_deg, z_um (docs/dpc.md)",
+            tooltip="the DPC optics file: wavelength, NAs, magnification, camera pixel, patterns, planes (docs/dpc.md)",
         )
         self.method = ComboBox(
             label="method",
@@ -58,9 +58,8 @@ class DpcWidget(StepWidget):
         self.run_button, self.cancel_button, self.status = run_buttons(
             "Reconstruct DPC", "the phase (one image a pattern) or the refractive index (a z-stack a pattern)"
         )
-        self.extend(
-            [self.stack, self.optics, self.method, self.alpha, self.sign, self.run_button, self.cancel_button, self.status]
-        )
+        settings = [self.stack, self.optics, self.method, self.alpha, self.sign]
+        self.extend([*settings, self.run_button, self.cancel_button, self.status])
         self.runner = JobRunner("DPC", self.run_button, self.cancel_button, self.status)
         self.run_button.changed.connect(self.run)
         follow_layers(napari_viewer, self)
