@@ -30,8 +30,8 @@ def add_dpc_command(sub) -> None:
         "--method",
         choices=tuple(DPC_METHODS),
         default="tikhonov",
-        help="tikhonov: linear and fast; tv: total variation with the sign of Δn; multislice: not for DPC stacks "
-        "yet (default %(default)s)",
+        help="tikhonov: linear and fast; tv: total variation with the sign of Δn; multislice (z-stacks): tv refined "
+        "with a multislice model of the images, for strong objects (default %(default)s)",
     )
     s.add_argument(
         "--alpha",

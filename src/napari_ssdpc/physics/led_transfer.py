@@ -16,11 +16,12 @@ import math
 import numpy as np
 
 from napari_ssdpc.errors import SsdpcError
+from napari_ssdpc.physics.apertures import disk_fraction, kohler_source
 from napari_ssdpc.physics.pupil import eta, soft_disk
 from napari_ssdpc.physics.transfer import fft_indices, weak_object_transfer_functions, zero_padded
 from napari_ssdpc.settings.dpc_optics import DpcOptics
 
-__all__ = ["LedPatterns"]
+__all__ = ["LedPatterns", "led_source_points"]
 
 
 class LedPatterns:
@@ -111,3 +112,38 @@ class LedPatterns:
             Unshifted FFT order.
         """
         return h if h.shape[-2:] == self.shape else zero_padded(h, self.shape)
+
+
+def led_source_points(optics: DpcOptics, h: float, q: int):
+    """The illumination of the multislice model of a DPC stack: points over the illumination disk on
+    a lattice of step h, each standing for q x q sub-points, weighted for every view by the part of
+    its sub-cell in the disk and in the view's half (a sub-point on the half's edge line counts half).
+
+    Parameters
+    ----------
+    optics : DpcOptics
+    h : float
+        Lattice step, cycles/µm.
+    q : int
+        Sub-points per point and axis.
+
+    Returns
+    -------
+    w : ndarray, (S, 2)
+        The points, cycles/µm.
+    w_sub : ndarray, (S, Q, 2)
+        Their sub-points (Q = q²).
+    wgt : ndarray, (S, Q, K)
+        Every sub-point's weight for every view (view k = p·F + f).
+    """
+    _, w, _ = kohler_source(optics.source_radius, h, 1)
+    t = ((np.arange(q) + 0.5) / q - 0.5) * h
+    w_sub = w[:, None] + np.stack(np.meshgrid(t, t), axis=-1).reshape(1, q * q, 2)
+    step = h / q
+    cell = disk_fraction(w_sub[..., 0], w_sub[..., 1], optics.source_radius, step) * step * step
+    halves = [
+        np.clip(0.5 + (w_sub[..., 0] * math.cos(a) + w_sub[..., 1] * math.sin(a)) / step, 0.0, 1.0)
+        for a in np.radians(optics.patterns_deg)
+    ]
+    wgt = np.repeat(np.stack(halves, axis=-1) * cell[..., None], len(optics.focal_planes_um), axis=-1)
+    return w, w_sub, wgt

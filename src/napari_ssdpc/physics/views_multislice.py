@@ -72,6 +72,7 @@ from napari_ssdpc.physics.multislice_source import (
 )
 from napari_ssdpc.physics.pupil import Pupil
 from napari_ssdpc.physics.views_adjoint import ViewsAdjoint
+from napari_ssdpc.settings.dpc_optics import DpcOptics
 from napari_ssdpc.settings.optics import Optics
 
 __all__ = ["ViewsMultislice"]
@@ -126,6 +127,15 @@ class ViewsMultislice(ViewsAdjoint):
         the backward pass recomputes them (a third propagation).
     max_bytes : int, optional
         Refuse (:class:`SsdpcError`) a model that would need more memory than this, bytes.
+    pupil : Pupil, optional
+        The detection pupil; default the optics' (``Pupil.of``). Another front end gives its own
+        (an LED array's images: the whole objective pupil, ρ = NA/λ about u_k = 0).
+    source : (w, w_sub, wgt), optional
+        The source points (S, 2), their sub-points (S, Q, 2) and every sub-point's weight for every
+        view (S, Q, K), as :func:`~napari_ssdpc.physics.multislice_source.source_quadrature` gives
+        them for the condenser disk (the default); another front end gives its own illumination.
+    focus_um : array_like, (K,), optional
+        Each view's focal plane, µm (a z-stack's images); default 0 for every view.
 
     Attributes
     ----------
@@ -149,7 +159,7 @@ class ViewsMultislice(ViewsAdjoint):
 
     def __init__(
         self,
-        optics: Optics,
+        optics: Optics | DpcOptics,
         lenslets,
         x_um,
         y_um,
@@ -168,6 +178,9 @@ class ViewsMultislice(ViewsAdjoint):
         backend: str | Backend | None = None,
         memory_mb: float = 2048.0,
         max_bytes: int | None = None,
+        pupil: Pupil | None = None,
+        source=None,
+        focus_um=None,
     ):
         self.bk = get_backend(backend)
         self.xp = self.bk.xp
@@ -198,11 +211,18 @@ class ViewsMultislice(ViewsAdjoint):
         # multislice runs once per point; its exit field stands for q x q sub-points of its cell,
         # which the exit propagation, the pupil and the sub-apertures see at their own tilt
         h, q = source_spacing_na / lam, int(source_subsamples)
-        self.pupil = Pupil.of(optics)
+        if pupil is None or source is None:
+            if not isinstance(optics, Optics):
+                raise SsdpcError("a front end of other optics gives the model its own pupil and source points")
+            pupil = Pupil.of(optics) if pupil is None else pupil
+        self.pupil = pupil
         # each lenslet's own sub-aperture: centre u_k, radius ρ_k, defocus d_k (docs/aberrations.md)
         u_k, rho_k, defocus_k = self.pupil.lenslet_arrays(lenslets)
         self.rho = float(rho_k.max())
-        w, w_sub, wgt = source_quadrature(optics, self.pupil, lenslets, h, q, edge_weights)
+        if source is None:
+            source = source_quadrature(optics, self.pupil, lenslets, h, q, edge_weights)  # type: ignore[arg-type]
+        w, w_sub, wgt = source
+        q = int(round(math.sqrt(w_sub.shape[1])))
         self.n_sources, self.n_subsources = len(w), q * q
         self.m = m = min(even_fast(int(math.ceil((4 * self.rho + h) / du)) + 4), nv)
         self.chunk = max(1, int(chunk))
@@ -228,6 +248,9 @@ class ViewsMultislice(ViewsAdjoint):
         self._rho_k = xp_.asarray(rho_k.astype(self.rdtype))[:, None, None]
         self._defocus_k = xp_.asarray(defocus_k.astype(self.rdtype))[:, None, None] if np.any(defocus_k) else None
         self._eta0 = xp_.asarray(eta0.astype(self.rdtype))[..., None, None, None]
+        # the exit propagation of every view: from the last screen to its focal plane (z_f = 0 but a z-stack's)
+        reach = z_exit - (np.zeros(len(u_k)) if focus_um is None else np.asarray(focus_um, float).reshape(-1))
+        self._reach = xp_.asarray(reach.astype(self.rdtype))[:, None, None]
         self._kernels: list | None = None
         i0 = self._interpolate(self._intensity(None)[0])  # sample-free views: constant per lenslet
         self.i0 = lit_views(np.asarray(self.bk.to_host(i0.mean(axis=(1, 2))), float))
@@ -290,7 +313,8 @@ class ViewsMultislice(ViewsAdjoint):
     def _make_kernel(self, sl):
         """The exit propagation, the pupil and the sub-aperture on the crops of the source points
         ``sl``: A_k(u) exp(i2π z_exit [η(u) − η(w')]) at u = w' + crop frequency for every sub-point
-        w' (paper Eqs. 2 and 6), zero outside the grid's band, (s, Q, K, m, m), complex."""
+        w' (paper Eqs. 2 and 6; z_exit − z_f for a view focused at z_f), zero outside the grid's band,
+        (s, Q, K, m, m), complex."""
         xp = self.xp
         ux, uy = self._ux[sl][..., None, :], self._uy[sl][..., :, None]
         inside = (
@@ -299,7 +323,7 @@ class ViewsMultislice(ViewsAdjoint):
             & self._inx[sl][..., None, :]
         )
         u2 = ux * ux + uy * uy
-        phase = (2 * math.pi * self.z_exit) * (xp.sqrt(xp.maximum(self._k2 - u2, 0)) - self._eta0[sl])
+        phase = (2 * math.pi * self._reach) * (xp.sqrt(xp.maximum(self._k2 - u2, 0)) - self._eta0[sl])
         if self.pupil.zernike or self._defocus_k is not None:  # the objective's and each lenslet's phase
             phase = phase + self.pupil.phase(ux, uy, self._uk, self._rho_k, self._defocus_k, xp)
         return (inside * xp.exp(1j * phase)).astype(self.cdtype)

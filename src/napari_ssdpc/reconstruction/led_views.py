@@ -15,7 +15,9 @@ import numpy as np
 from scipy import ndimage
 
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.physics.led_transfer import LedPatterns
+from napari_ssdpc.physics.led_transfer import LedPatterns, led_source_points
+from napari_ssdpc.physics.pupil import Pupil
+from napari_ssdpc.physics.views_multislice import ViewsMultislice
 from napari_ssdpc.reconstruction.forward import ViewModel
 from napari_ssdpc.settings.dpc_optics import DpcOptics
 
@@ -91,19 +93,39 @@ class LedViews:
         """
         return ViewModel(self.patterns, self.shape, self.pixel_um, z_um, progress=progress, backend=backend)
 
-    def multislice_model(self, z_um, dz_um: float, roi, settings, *, backend=None, max_bytes=None):
-        """Not available for DPC stacks yet (docs/dpc.md).
+    def multislice_model(self, z_um, dz_um: float, roi, settings, *, backend=None, max_bytes=None) -> ViewsMultislice:
+        """The multislice model of the views: every pattern's half of the illumination disk through
+        the volume, the whole objective pupil, each image at its focal plane.
 
         Parameters
         ----------
         z_um, dz_um, roi, settings, backend, max_bytes
             As :meth:`~napari_ssdpc.reconstruction.measurements.Measurements.multislice_model`.
 
-        Raises
-        ------
-        SsdpcError
+        Returns
+        -------
+        ViewsMultislice
         """
-        raise SsdpcError("the 'multislice' method does not take DPC stacks yet; use 'tv' or 'tikhonov'")
+        o = self.optics
+        if not o.is_stack:
+            raise SsdpcError("the 'multislice' method takes z-stacks (z_um in the optics file); use 'tv' for 2D")
+        h = settings.source_spacing_na / o.wavelength_um
+        return ViewsMultislice(
+            o,
+            np.zeros((self.n_views, 2)),  # every view: the whole pupil, centred on the axis
+            self.x_um,
+            self.y_um,
+            z_um,
+            roi=roi,
+            refine=settings.refine,
+            substeps=settings.substeps,
+            dz_um=dz_um,
+            max_bytes=max_bytes,
+            backend=backend,
+            pupil=Pupil(o.cutoff, o.cutoff),
+            source=led_source_points(o, h, settings.source_subsamples),
+            focus_um=np.tile(o.focal_planes_um, len(o.patterns_deg)),
+        )
 
     def __call__(self, stack) -> np.ndarray:
         """The stack's images as views whose direct light is 1.

@@ -37,9 +37,10 @@ class DpcWidget(StepWidget):
         )
         self.method = ComboBox(
             label="method",
-            choices=["tikhonov", "tv"],
+            choices=["tikhonov", "tv", "multislice"],
             value="tikhonov",
-            tooltip="tikhonov: linear, under a second; tv: total variation with the sign of Δn (seconds)",
+            tooltip="tikhonov: linear, under a second; tv: total variation with the sign of Δn (seconds); "
+            "multislice (z-stacks): tv refined with a multislice model, for strong objects (a minute or more)",
         )
         self.alpha = FloatSpinBox(
             label="α (Tikhonov)",
