@@ -22,13 +22,15 @@ def test_the_widget_reconstructs_a_stack_layer_into_a_phase_layer_in_micrometres
     make_napari_viewer, qtbot, monkeypatch, tmp_path
 ):
     from napari_ssdpc._napari import notify
-    from napari_ssdpc._napari.widgets.dpc import DpcWidget
+    from napari_ssdpc._napari.widgets.dpc import DpcDock
 
     shown = []
     monkeypatch.setattr(notify, "error", lambda m: shown.append(str(m)))
     viewer = make_napari_viewer()
-    _, widget = viewer.window.add_plugin_dock_widget("napari-ssdpc", "DPC stack (LED array, segmented condenser)")
-    assert isinstance(widget, DpcWidget) and widget.stack.value is None
+    _, dock = viewer.window.add_plugin_dock_widget("napari-ssdpc", "DPC stack (LED array, segmented condenser)")
+    assert isinstance(dock, DpcDock)
+    widget = dock.step
+    assert widget.stack.value is None
     assert widget.run() is None and "no DPC stack" in shown[-1]
     viewer.add_image(tifffile.imread(DATA / "testDataset_dpc.tif"), name="star")
     assert widget.stack.value.name == "star"

@@ -34,25 +34,36 @@ def _dock_tabs(viewer):
     return dock, w
 
 
-def test_the_plugins_menu_holds_the_dock_and_the_measurements_only():
-    """The dock holds every step of the workflow; the other entries measure: results over time, and
-    beads fitted as spheres."""
+def test_the_plugins_menu_holds_the_dock_the_measurements_and_the_second_front_end():
+    """The dock holds every step of the light-field workflow; two entries measure (results over time,
+    beads fitted as spheres); one takes a conventional DPC stack, which has none of the dock's steps
+    (no calibration, no flat)."""
     from npe2 import PluginManifest
 
     import napari_ssdpc
 
     manifest = PluginManifest.from_file(Path(napari_ssdpc.__file__).parent / "napari.yaml")
     names = [w.display_name for w in manifest.contributions.widgets]
-    assert names == ["ssDPC", "Objects over time", "Beads (each fitted as a sphere)"]
+    assert names == [
+        "ssDPC",
+        "Objects over time",
+        "Beads (each fitted as a sphere)",
+        "DPC stack (LED array, segmented condenser)",
+    ]
 
 
 def test_every_dock_of_the_plugin_open_at_once_fits_a_laptop_screen(make_napari_viewer, qtbot):
-    """The ssDPC dock, Objects over time and Beads open together: the docks scroll, the window
-    stays within a 1280 x 800 screen (the objects' table and plots made it 989 px tall)."""
+    """The ssDPC dock, Objects over time, Beads and DPC stack open together: the docks scroll, the
+    window stays within a 1280 x 800 screen (the objects' table and plots made it 989 px tall)."""
     viewer = make_napari_viewer(show=True)
     window = viewer.window._qt_window
     window.resize(1280, 800)
-    for name in ("ssDPC", "Objects over time", "Beads (each fitted as a sphere)"):
+    for name in (
+        "ssDPC",
+        "Objects over time",
+        "Beads (each fitted as a sphere)",
+        "DPC stack (LED array, segmented condenser)",
+    ):
         viewer.window.add_plugin_dock_widget("napari-ssdpc", name)
         qtbot.wait(100)
         size = window.size()

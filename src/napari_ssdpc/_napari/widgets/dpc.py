@@ -7,23 +7,31 @@ from pathlib import Path
 
 import numpy as np
 from magicgui.widgets import ComboBox, FileEdit, FloatSpinBox
+from qtpy.QtWidgets import QWidget
 
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.widgets.choices import LayerChoice, image_layer_choices
-from napari_ssdpc._napari.widgets.common import StepWidget, follow_layers, run_buttons, show_layer
+from napari_ssdpc._napari.widgets.common import StepWidget, follow_layers, run_buttons, scrolling, show_layer
 from napari_ssdpc._napari.widgets.jobs import JobRunner
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.reconstruction.led_dpc import DPC_ALPHA, dpc_settings, reconstruct_dpc
 from napari_ssdpc.settings.dpc_optics import DpcOptics
 
-__all__ = ["DpcWidget"]
+__all__ = ["DpcDock", "DpcWidget"]
 
 
 class DpcWidget(StepWidget):
-    """Reconstruct a DPC stack layer: one image per half-disk pattern (2D) or a z-stack per pattern (3D)."""
+    """Reconstruct a DPC stack layer: one image per half-disk pattern (2D) or a z-stack per pattern (3D).
 
-    def __init__(self, napari_viewer):
-        super().__init__(napari_viewer)
+    Parameters
+    ----------
+    napari_viewer : napari.Viewer
+    scrollable : bool
+        False inside :class:`DpcDock` (which scrolls).
+    """
+
+    def __init__(self, napari_viewer, scrollable: bool = True):
+        super().__init__(napari_viewer, scrollable=scrollable)
         self.stack = LayerChoice(
             label="DPC stack",
             choices=image_layer_choices(napari_viewer),
@@ -102,3 +110,23 @@ class DpcWidget(StepWidget):
         }
         show_layer(self.viewer, ri, kwargs)
         return f"{source}: RI {ri.min():.4f} .. {ri.max():.4f} on {len(r.z_um)} planes ({r.method})"
+
+
+class DpcDock(QWidget):
+    """The DPC stack widget as the Plugins menu docks it: it scrolls, so that with every dock of the
+    plugin open the window still fits a laptop's screen (napari docks a magicgui widget's content
+    without its scroll area).
+
+    Parameters
+    ----------
+    napari_viewer : napari.Viewer
+
+    Attributes
+    ----------
+    step : DpcWidget
+    """
+
+    def __init__(self, napari_viewer):
+        super().__init__()
+        self.step = DpcWidget(napari_viewer, scrollable=False)
+        scrolling(self.step.native, into=self)
