@@ -22,6 +22,14 @@ DATA = ROOT / "tests" / "data" / "dpc_cmat"
 OUT = ROOT / "docs" / "images"
 
 
+def _panel(fig, ax, image, title: str, **shown) -> None:
+    """One image with its title, x in µm and a colour bar."""
+    h = ax.imshow(image, **shown)
+    ax.set_title(title, fontsize=12)
+    ax.set_xlabel("x (µm)")
+    fig.colorbar(h, ax=ax, shrink=0.8)
+
+
 def star() -> Path:
     """Raw image, the phase of `ssdpc dpc`, the reference phase and their difference, on the star's centre."""
     images = tifffile.imread(DATA / "testDataset_dpc.tif")
@@ -40,10 +48,7 @@ def star() -> Path:
         ((ours - peer)[box], f"difference, rad (correlation {corr:.4f})", "RdBu_r", (-0.1, 0.1)),
     )
     for ax, (im, title, cmap, lim) in zip(axes, panels):
-        h = ax.imshow(im, cmap=cmap, extent=extent, vmin=None if lim is None else lim[0], vmax=None if lim is None else lim[1])
-        ax.set_title(title, fontsize=12)
-        ax.set_xlabel("x (µm)")
-        fig.colorbar(h, ax=ax, shrink=0.8)
+        _panel(fig, ax, im, title, cmap=cmap, extent=extent, vmin=lim and lim[0], vmax=lim and lim[1])
     axes[0].set_ylabel("y (µm)")
     fig.suptitle("Phase Siemens star, 40x / 0.4, σ = 1 (Waller-Lab/dpc-cMat test set)", fontsize=13)
     path = OUT / "dpc_star.png"
@@ -72,10 +77,7 @@ def beads() -> Path:
     row = 40  # y = 0.08 µm
     panels = [("truth", truth)] + [(m, r.delta_n[:, row, :]) for m, r in results.items()]
     for ax, (title, im) in zip(axes, panels):
-        h = ax.imshow(im, cmap="magma", extent=extent, aspect="auto", vmin=0, vmax=0.015)
-        ax.set_title(f"{title}: Δn, xz at y = 0", fontsize=12)
-        ax.set_xlabel("x (µm)")
-        fig.colorbar(h, ax=ax, shrink=0.8)
+        _panel(fig, ax, im, f"{title}: Δn, xz at y = 0", cmap="magma", extent=extent, aspect="auto", vmin=0, vmax=0.015)
     axes[0].set_ylabel("z (µm, > 0 farther from the objective)")
     fig.suptitle("Simulated z-stack, 40x / 0.65 in water, σ = 1: two beads on one axis and a third", fontsize=13)
     path = OUT / "dpc_beads.png"

@@ -16,7 +16,8 @@ import math
 import numpy as np
 
 from napari_ssdpc.errors import SsdpcError
-from napari_ssdpc.physics.apertures import disk_fraction, kohler_source
+from napari_ssdpc.physics.apertures import disk_fraction
+from napari_ssdpc.physics.multislice_source import disk_points
 from napari_ssdpc.physics.pupil import eta, soft_disk
 from napari_ssdpc.physics.transfer import fft_indices, weak_object_transfer_functions, zero_padded
 from napari_ssdpc.settings.dpc_optics import DpcOptics
@@ -136,9 +137,7 @@ def led_source_points(optics: DpcOptics, h: float, q: int):
     wgt : ndarray, (S, Q, K)
         Every sub-point's weight for every view (view k = p·F + f).
     """
-    _, w, _ = kohler_source(optics.source_radius, h, 1)
-    t = ((np.arange(q) + 0.5) / q - 0.5) * h
-    w_sub = w[:, None] + np.stack(np.meshgrid(t, t), axis=-1).reshape(1, q * q, 2)
+    w, w_sub = disk_points(optics.source_radius, h, q)
     step = h / q
     cell = disk_fraction(w_sub[..., 0], w_sub[..., 1], optics.source_radius, step) * step * step
     halves = [

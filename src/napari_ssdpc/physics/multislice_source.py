@@ -20,6 +20,7 @@ from napari_ssdpc.settings.optics import Optics
 
 __all__ = [
     "CropInterpolation",
+    "disk_points",
     "even_fast",
     "even_planes",
     "fits_memory",
@@ -109,12 +110,8 @@ def source_quadrature(optics: Optics, pupil: Pupil, lenslets, h: float, q: int, 
     wgt : ndarray, (S, Q, K)
         The weight of every sub-point for every lenslet.
     """
-    if q < 1:
-        raise SsdpcError("source_subsamples must be a positive integer")
     c = optics.source_centre  # the condenser disk's centre
-    _, w, _ = kohler_source(optics.source_radius, h, 1, centre=c)
-    t = ((np.arange(q) + 0.5) / q - 0.5) * h
-    w_sub = w[:, None] + np.stack(np.meshgrid(t, t), axis=-1).reshape(1, q * q, 2)
+    w, w_sub = disk_points(optics.source_radius, h, q, c)
     flat_sub = w_sub.reshape(-1, 2)
     if edge_weights:  # (S·Q, K): each lenslet's bright-field edge sampled finely
         wgt = lenslet_source_weights(flat_sub, h / q, optics.source_radius, lenslets, pupil, centre=c)
@@ -122,6 +119,35 @@ def source_quadrature(optics: Optics, pupil: Pupil, lenslets, h: float, q: int, 
         cell = disk_fraction(flat_sub[:, 0] - c[0], flat_sub[:, 1] - c[1], optics.source_radius, h / q) * (h / q) ** 2
         wgt = np.repeat(cell[:, None], len(lenslets), axis=1)
     return w, w_sub, wgt.reshape(len(w), q * q, len(lenslets))
+
+
+def disk_points(radius: float, h: float, q: int, centre=(0.0, 0.0)):
+    """Points over a source disk on a square lattice of step h, each standing for the q x q
+    sub-points of its cell.
+
+    Parameters
+    ----------
+    radius : float
+        The disk's radius, cycles/µm.
+    h : float
+        Lattice step, cycles/µm.
+    q : int
+        Sub-points per point and axis.
+    centre : (float, float)
+        The disk's centre, cycles/µm.
+
+    Returns
+    -------
+    w : ndarray, (S, 2)
+        The points, cycles/µm.
+    w_sub : ndarray, (S, Q, 2)
+        Their sub-points (Q = q²), at the centres of the q x q sub-cells.
+    """
+    if q < 1:
+        raise SsdpcError("source_subsamples must be a positive integer")
+    _, w, _ = kohler_source(radius, h, 1, centre=centre)
+    t = ((np.arange(q) + 0.5) / q - 0.5) * h
+    return w, w[:, None] + np.stack(np.meshgrid(t, t), axis=-1).reshape(1, q * q, 2)
 
 
 def lenslet_crops(w, w_sub, u_k, du: float, m: int, n: int):
