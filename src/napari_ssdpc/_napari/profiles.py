@@ -22,7 +22,7 @@ from qtpy.QtWidgets import QVBoxLayout, QWidget
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.widgets.choices import LayerChoice, result_layer_choices
 from napari_ssdpc._napari.widgets.common import scrolling
-from napari_ssdpc._napari.widgets.plot import LazyFigure
+from napari_ssdpc._napari.widgets.plot import Deferred, LazyFigure
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.files import atomic_write
 
@@ -152,6 +152,7 @@ class ProfileWidget(QWidget):
         column.addWidget(self.controls.native)
         self.plot = LazyFigure(column, (4, 3), 220)  # made with the first profile drawn
         self._axes = None
+        self.replot = Deferred(self._plot)
         scrolling(inner, into=self)  # the dock may be short (a laptop screen, other docks open)
         self.profiles: list[dict] = []
         self._connected = []
@@ -272,11 +273,15 @@ class ProfileWidget(QWidget):
             self.info.value = str(e)
         else:
             self.info.value = f"{len(self.profiles)} line(s)" if self.profiles else "draw a line in the lines layer"
-        self._plot()
+        self.replot()  # drawn on a turn of the event loop of its own, once per burst of events
 
     @property
     def axes(self):
-        """The matplotlib Axes of the profiles."""
+        """The matplotlib Axes of the profiles (drawn up to date)."""
+        self.replot.flush()
+        return self._plot_axes()
+
+    def _plot_axes(self):
         if self._axes is None:
             self._axes = self.plot.figure.add_subplot(1, 1, 1)
         return self._axes
@@ -284,7 +289,7 @@ class ProfileWidget(QWidget):
     def _plot(self):
         if not self.profiles and not self.plot.made:  # nothing to draw yet: matplotlib can wait
             return
-        ax = self.axes
+        ax = self._plot_axes()
         ax.clear()
         img = self.image.value
         info = img.metadata.get("ssdpc", {}) if img is not None else {}

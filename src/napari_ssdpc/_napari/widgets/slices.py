@@ -14,7 +14,7 @@ from qtpy.QtWidgets import QVBoxLayout, QWidget
 
 from napari_ssdpc._napari.widgets.choices import LayerChoice, result_layer_choices
 from napari_ssdpc._napari.widgets.common import MIN_DOCK_HEIGHT_PX, follow_layers, wrap
-from napari_ssdpc._napari.widgets.plot import LazyFigure
+from napari_ssdpc._napari.widgets.plot import Deferred, LazyFigure
 
 __all__ = ["SlicesWidget", "sections"]
 
@@ -38,17 +38,17 @@ def sections(layer, point) -> dict:
     data = layer.data
     idx = np.round(np.asarray(layer.world_to_data(np.asarray(point)[-layer.ndim :]), float)).astype(int)
     idx = np.clip(idx, 0, np.asarray(data.shape) - 1)
-    vol = np.asarray(data[tuple(idx[:-3])]) if layer.ndim > 3 else np.asarray(data)
-    z, y, x = idx[-3:]
+    lead = tuple(int(i) for i in idx[:-3])  # the frame of a series
+    z, y, x = (int(i) for i in idx[-3:])
     (dz, dy, dx), (z0, y0, x0) = layer.scale[-3:], layer.translate[-3:]
-    nz, ny, nx = vol.shape
+    nz, ny, nx = data.shape[-3:]
     zlim = (z0 + (nz - 0.5) * dz, z0 - 0.5 * dz)  # z grows downward, as in the xz/yz views of napari
-    return {
-        "xz": vol[:, y, :],
-        "yz": vol[:, :, x],
+    return {  # only the two sections are read (a store's frame stays on disk)
+        "xz": np.asarray(data[(*lead, slice(None), y, slice(None))]),
+        "yz": np.asarray(data[(*lead, slice(None), slice(None), x)]),
         "extent_xz": (x0 - 0.5 * dx, x0 + (nx - 0.5) * dx, *zlim),
         "extent_yz": (y0 - 0.5 * dy, y0 + (ny - 0.5) * dy, *zlim),
-        "at": (int(z), int(y), int(x)),
+        "at": (z, y, x),
     }
 
 
@@ -73,9 +73,11 @@ class SlicesWidget(QWidget):
         layout = QVBoxLayout(self)
         layout.addWidget(self.controls.native)
         self.plot = LazyFigure(layout, (4, 5), 2 * MIN_DOCK_HEIGHT_PX)  # made with the first section drawn
+        self._images: list = []  # the two sections' images, kept between draws
+        self.redraw = Deferred(self.update)  # a burst of layer and slider events draws once
         follow_layers(napari_viewer, self.controls)
-        self.layer.changed.connect(lambda *_: self.update())
-        napari_viewer.dims.events.current_step.connect(lambda *_: self.update())
+        self.layer.changed.connect(self.redraw)
+        napari_viewer.dims.events.current_step.connect(self.redraw)
         napari_viewer.mouse_drag_callbacks.append(self._clicked)
 
     @property
@@ -86,7 +88,7 @@ class SlicesWidget(QWidget):
     def _clicked(self, viewer, event):
         """A click in the canvas moves the sections to that position."""
         self._point = tuple(event.position)
-        self.update()
+        self.redraw()
 
     def update(self) -> None:
         """Draw the sections of the chosen volume through the current point."""
@@ -95,22 +97,32 @@ class SlicesWidget(QWidget):
             self.info.value = "reconstruct a frame: its xz and yz sections appear here"
             if self.plot.made:
                 self.figure.clear()
+                self._images = []
                 self.plot.draw()
             return
-        self.figure.clear()
         point = np.array(self.viewer.dims.point, float)
         clicked = getattr(self, "_point", None)
         if clicked is not None and len(clicked) == len(point):
             point[-2:] = np.asarray(clicked)[-2:]  # y, x of the last click; z from the slider
         s = sections(layer, point)
         lo, hi = layer.contrast_limits
-        cmap = layer.colormap.name
-        for k, (key, label) in enumerate((("xz", "x (µm)"), ("yz", "y (µm)"))):
-            ax = self.figure.add_subplot(2, 1, k + 1)
-            ax.imshow(s[key], extent=s[f"extent_{key}"], cmap=_mpl_cmap(cmap), vmin=lo, vmax=hi, aspect="equal")
-            ax.set_xlabel(label)
-            ax.set_ylabel("z (µm)")
-            ax.set_title(f"{key} section", fontsize=9)
+        cmap = _mpl_cmap(layer.colormap.name)
+        if not self._images:  # the axes are made once: clearing and making them again costs the most
+            self.figure.clear()
+            for k, (key, label) in enumerate((("xz", "x (µm)"), ("yz", "y (µm)"))):
+                ax = self.figure.add_subplot(2, 1, k + 1)
+                self._images.append(ax.imshow(s[key], extent=s[f"extent_{key}"], aspect="equal"))
+                ax.set_xlabel(label)
+                ax.set_ylabel("z (µm)")
+                ax.set_title(f"{key} section", fontsize=9)
+        for image, key in zip(self._images, ("xz", "yz")):
+            image.set_data(s[key])
+            image.set_extent(s[f"extent_{key}"])
+            image.set_cmap(cmap)
+            image.set_clim(lo, hi)
+            left, right, bottom, top = s[f"extent_{key}"]
+            image.axes.set_xlim(left, right)
+            image.axes.set_ylim(bottom, top)
         z, y, x = s["at"]
         dz, dy, dx = layer.scale[-3:]
         z0, y0, x0 = layer.translate[-3:]
