@@ -18,7 +18,7 @@ import numpy as np
 from napari_ssdpc.backend import get_backend
 from napari_ssdpc.errors import SsdpcError
 from napari_ssdpc.reconstruction.frame_result import z_grid
-from napari_ssdpc.reconstruction.led_views import LedViews
+from napari_ssdpc.reconstruction.led_views import MULTISLICE_2D, LedViews
 from napari_ssdpc.reconstruction.methods import method_class
 from napari_ssdpc.reconstruction.methods.base import Setup
 from napari_ssdpc.settings.dpc_optics import DpcOptics
@@ -141,6 +141,8 @@ def settings_for(
     """
     if method not in DPC_METHODS:
         raise SsdpcError(f"unknown DPC method '{method}'; use one of {', '.join(DPC_METHODS)}")
+    if method == "multislice" and not optics.is_stack:
+        raise SsdpcError(MULTISLICE_2D)
     base = (settings or dpc_settings(optics)).to_dict()
     if optics.is_stack:
         planes = sorted(optics.focal_planes_um)

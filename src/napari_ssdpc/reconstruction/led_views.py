@@ -21,7 +21,10 @@ from napari_ssdpc.physics.views_multislice import ViewsMultislice
 from napari_ssdpc.reconstruction.forward import ViewModel
 from napari_ssdpc.settings.dpc_optics import DpcOptics
 
-__all__ = ["LedViews"]
+__all__ = ["MULTISLICE_2D", "LedViews"]
+
+#: Why a stack of one image a pattern has no multislice model (its one slab has no depth).
+MULTISLICE_2D = "the 'multislice' method takes z-stacks (z_um in the optics file); use 'tv' for 2D"
 
 #: Smallest image side the background window (half the shorter side) still leaves room for, px.
 MIN_SIDE_PX = 32
@@ -108,7 +111,7 @@ class LedViews:
         """
         o = self.optics
         if not o.is_stack:
-            raise SsdpcError("the 'multislice' method takes z-stacks (z_um in the optics file); use 'tv' for 2D")
+            raise SsdpcError(MULTISLICE_2D)
         h = settings.source_spacing_na / o.wavelength_um
         return ViewsMultislice(
             o,
