@@ -9,12 +9,17 @@ WORKER_TIMEOUT_MS = 180_000
 
 
 def wait_for(qtbot, widget):
-    """Wait until the widget's running job has finished."""
+    """Wait until the widget's running job has finished and its layers are all shown (a job's layers
+    come one per turn of the event loop)."""
+    from napari_ssdpc._napari.widgets.session import session_for
+
     worker = widget.runner.worker
     if worker is not None:
         with qtbot.waitSignal(worker.finished, timeout=WORKER_TIMEOUT_MS):
             pass
     qtbot.waitUntil(lambda: widget.runner.worker is None, timeout=5000)
+    session = session_for(widget.viewer)
+    qtbot.waitUntil(lambda: session.pending_layers == 0, timeout=5000)
 
 
 def prepare_bead(viewer, qtbot, widgets, optics, z, dz):

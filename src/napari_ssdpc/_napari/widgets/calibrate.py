@@ -13,7 +13,7 @@ from napari_ssdpc._napari.widgets.common import (
     follow_layers,
     frame_index,
     run_buttons,
-    show_layer,
+    show_in_turns,
     wrap,
 )
 from napari_ssdpc._napari.widgets.jobs import JobRunner
@@ -158,8 +158,7 @@ class CalibrateWidget(StepWidget):
 
     def _done(self, cal, source: str):
         self.calibration = cal
-        for data, kwargs, kind in calibration_layers(cal, source):
-            show_layer(self.viewer, data, kwargs, kind)
+        show_in_turns(self.viewer, calibration_layers(cal, source))
         g = cal.grid
         self.result.value = (
             f"axis (x, y) = ({g.axis_px[0]:.2f}, {g.axis_px[1]:.2f}) px\n"

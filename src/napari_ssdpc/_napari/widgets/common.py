@@ -26,6 +26,7 @@ __all__ = [
     "frame_index",
     "region_um",
     "run_buttons",
+    "show_in_turns",
     "show_layer",
     "wrap",
 ]
@@ -137,6 +138,39 @@ def show_layer(viewer, data, kwargs: dict, layer_type: str = "image"):
         viewer.layers.move(viewer.layers.index(new), index)
         return new
     return getattr(viewer, f"add_{layer_type}")(data, **kwargs)
+
+
+def show_in_turns(viewer, layers) -> None:
+    """Show layers one per turn of the event loop, the first at once: napari adding several layers
+    in one event (a calibration's circles, labelled centres and deviations) stalls the GUI for their
+    sum; between turns it draws and answers. The session counts the layers still to come
+    (``pending_layers``).
+
+    Parameters
+    ----------
+    viewer : napari.Viewer
+    layers : list of (data, kwargs, type)
+        As :func:`show_layer` takes them.
+    """
+    from qtpy.QtCore import QTimer
+
+    first, *rest = list(layers) or [None]
+    if first is None:
+        return
+    show_layer(viewer, *first)
+    if not rest:
+        return
+    session = session_for(viewer)
+    session.pending_layers += 1
+
+    def next_turn():
+        session.pending_layers -= 1
+        try:
+            show_in_turns(viewer, rest)
+        except RuntimeError:  # the viewer was closed meanwhile
+            pass
+
+    QTimer.singleShot(0, next_turn)
 
 
 def catching_warnings(fn, *args, **kwargs):

@@ -15,7 +15,7 @@ from napari_ssdpc._napari.widgets.common import (
     follow_layers,
     frame_index,
     run_buttons,
-    show_layer,
+    show_in_turns,
     wrap,
 )
 from napari_ssdpc._napari.widgets.jobs import JobRunner
@@ -101,7 +101,6 @@ class OpticsFitWidget(StepWidget):
         return self.runner.start(work, lambda fit: self._done(fit, f"{stem} fitted"), "Fit the optics")
 
     def _done(self, fit, name: str):
-        for data, kwargs, kind in calibration_layers(fit.calibration, name):
-            show_layer(self.viewer, data, kwargs, kind)
+        show_in_turns(self.viewer, calibration_layers(fit.calibration, name))
         self.result.value = "\n".join(fit.report())
         return f"fitted: '{name}{_CIRCLES}'"
