@@ -245,3 +245,20 @@ def test_a_strong_bead_in_a_z_stack_is_refined_by_multislice():
     assert tv_mass > 1.25 and ms_mass == pytest.approx(1.0, abs=0.15)
     assert ms_depth == pytest.approx(2.0, abs=0.6) and ms_peak > 0.035
     assert ms.report["multislice_residual_over_noise"] < 0.2 * ms.report["multislice_starts_over_noise"]["tv"]
+
+
+def test_three_patterns_written_as_one_rgb_page_are_three_images(star, tmp_path):
+    """tifffile writes three images as one RGB page (planar or interleaved): the DPC reader takes each
+    sample as an image, in order; a result of napari-ssdpc is refused."""
+    from napari_ssdpc.io.frames import read_stack
+
+    images = star[0][:3]
+    tifffile.imwrite(tmp_path / "planar.tif", images)  # (3, y, x): one page of three samples
+    tifffile.imwrite(tmp_path / "interleaved.tif", np.moveaxis(images, 0, -1), photometric="rgb")
+    for name in ("planar.tif", "interleaved.tif"):
+        np.testing.assert_array_equal(read_stack(tmp_path / name), images)
+    out = tmp_path / "star.ome.tif"
+    optics = DATA / "optics.yaml"
+    assert main([str(a) for a in ("dpc", DATA / "testDataset_dpc.tif", "--optics", optics, "-o", out)]) == 0
+    with pytest.raises(SsdpcError, match="a reconstruction result"):
+        read_stack(out)

@@ -62,7 +62,8 @@ def cmd_dpc(args) -> None:
     from napari_ssdpc.io.frames import read_stack, write_ome_tiff
     from napari_ssdpc.io.paths import check_outputs
     from napari_ssdpc.progress import tqdm_callback
-    from napari_ssdpc.reconstruction.led_dpc import dpc_settings, reconstruct_dpc
+    from napari_ssdpc.reconstruction.led_dpc import dpc_settings, reconstruct_dpc, settings_for
+    from napari_ssdpc.reconstruction.led_views import LedViews
     from napari_ssdpc.settings.dpc_optics import DpcOptics
 
     optics = DpcOptics.from_yaml(args.optics)
@@ -72,6 +73,9 @@ def cmd_dpc(args) -> None:
     stack = read_stack(args.stack, name="DPC stack")
     settings = dpc_settings(optics, alpha=args.alpha, sign=args.sign, iterations=args.iterations)
     z = {"z_min_um": args.z_min_um, "z_max_um": args.z_max_um, "dz_um": args.dz_um}
+    settings_for(optics, args.method, settings, **z)  # refused before any progress is shown
+    if stack.ndim >= 3:
+        LedViews(optics, stack.shape[-2:])(stack)
     with tqdm_callback("dpc", unit="step") as cb:
         r = reconstruct_dpc(stack, optics, args.method, settings=settings, progress=cb, **z)
     meta = {"source": str(args.stack), "optics": optics.to_dict(), "medium_index": optics.medium_index}

@@ -186,14 +186,24 @@ def read_stack(path, *, name: str = "stack") -> np.ndarray:
     Returns
     -------
     numpy.ndarray
-        The file's images in its own order and shape, singleton axes dropped.
+        The file's images in its own order and shape, singleton axes dropped; the samples of a
+        colour (RGB) file are images of their own, first (three images written as one RGB page).
 
     Raises
     ------
     SsdpcError
-        Missing, unreadable, truncated, colour (RGB) or a reconstruction result.
+        Missing, unreadable, truncated or a reconstruction result.
     """
-    return np.squeeze(_read(Path(path), name, _check_not_result))
+    seen: dict = {}
+
+    def check(info, p, what):
+        _check_result(info, p, what)
+        seen["axes"] = info.axes
+
+    data = _read(Path(path), name, check)
+    if str(seen.get("axes", "")).endswith("S") and data.ndim >= 3:  # interleaved samples: one image each
+        data = np.moveaxis(data, -1, 0)
+    return np.squeeze(data)
 
 
 def _read(path: Path, name: str, check) -> np.ndarray:
@@ -223,6 +233,11 @@ def _check_not_result(info: TiffInfo, path: Path, name: str) -> None:
             f"{path}: a colour (RGB) image, not camera images; give the monochrome camera images "
             "(export them as greyscale TIFF without colour conversion)"
         )
+    _check_result(info, path, name)
+
+
+def _check_result(info: TiffInfo, path: Path, name: str) -> None:
+    """Refuse an ssdpc result given where camera images belong."""
     text = info.description
     if "napari-ssdpc" in text and "quantity" in text:
         what = next((q for q in ("refractive index", "phase", "absorption", "DPC") if q in text), "a volume")
