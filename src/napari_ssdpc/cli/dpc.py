@@ -75,7 +75,7 @@ def cmd_dpc(args) -> None:
     z = {"z_min_um": args.z_min_um, "z_max_um": args.z_max_um, "dz_um": args.dz_um}
     settings_for(optics, args.method, settings, **z)  # refused before any progress is shown
     if stack.ndim >= 3:
-        LedViews(optics, stack.shape[-2:])(stack)
+        LedViews(optics, stack.shape[-2:]).check(stack)
     with tqdm_callback("dpc", unit="step") as cb:
         r = reconstruct_dpc(stack, optics, args.method, settings=settings, progress=cb, **z)
     meta = {"source": str(args.stack), "optics": optics.to_dict(), "medium_index": optics.medium_index}
@@ -92,12 +92,11 @@ def cmd_dpc(args) -> None:
         return
     assert r.delta_n is not None
     ri = optics.medium_index + r.delta_n
-    dz = float(r.z_um[1] - r.z_um[0]) if len(r.z_um) > 1 else settings.dz_um
     path = write_ome_tiff(
         out["output"],
         ri,
         axes="ZYX",
-        voxel_um=(dz, r.pixel_um, r.pixel_um),
+        voxel_um=(r.dz_um, r.pixel_um, r.pixel_um),
         description=meta | {"quantity": "refractive index", "z_um": [float(z) for z in r.z_um]},
     )
     print(

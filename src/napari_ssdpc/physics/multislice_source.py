@@ -26,6 +26,7 @@ __all__ = [
     "fits_memory",
     "lenslet_crops",
     "lit_views",
+    "model_bytes",
     "slab_propagators",
     "source_quadrature",
     "square_roi",
@@ -313,6 +314,43 @@ def lit_views(i0: np.ndarray) -> np.ndarray:
             "lenslets, or make source_spacing_na smaller"
         )
     return i0
+
+
+def model_bytes(
+    sources: int, subsources: int, views: int, n: int, m: int, slabs: int, chunk: int, cdtype, memory_mb: float
+) -> int:
+    """Peak memory of a multislice misfit with its gradient, bytes: the fields kept between the passes
+    (up to ``memory_mb``), every sub-point's view fields, the kept crop kernels, the propagators and
+    one chunk's temporaries.
+
+    Parameters
+    ----------
+    sources, subsources : int
+        Source points and sub-points per point.
+    views : int
+        Views (lenslets or images).
+    n, m : int
+        The model grid's side and the crops' side, samples.
+    slabs : int
+        Multislice slabs (planes x substeps).
+    chunk : int
+        Source points propagated at a time.
+    cdtype : numpy dtype
+        Complex dtype of the fields.
+    memory_mb : float
+        Largest memory for the kept fields, MiB.
+
+    Returns
+    -------
+    int
+    """
+    c = np.dtype(cdtype).itemsize
+    s, q = sources, subsources
+    pairs = s * q * views * m * m * c
+    fields = min(slabs * s * n * n * c, memory_mb * 2**20)
+    kernels = pairs if pairs <= memory_mb * 2**18 else 0
+    temporaries = chunk * (4 * q * views * m * m + 6 * n * n) * c
+    return int(fields + pairs + kernels + 3 * s * n * n * c + temporaries)
 
 
 def fits_memory(bytes_needed: int, max_bytes: int | None, side_um: float, planes: int) -> None:

@@ -67,6 +67,7 @@ from napari_ssdpc.physics.multislice_source import (
     fits_memory,
     lenslet_crops,
     lit_views,
+    model_bytes,
     slab_propagators,
     source_quadrature,
 )
@@ -227,7 +228,8 @@ class ViewsMultislice(ViewsAdjoint):
         self.m = m = min(even_fast(int(math.ceil((4 * self.rho + h) / du)) + 4), nv)
         self.chunk = max(1, int(chunk))
         self.memory_mb = float(memory_mb)
-        self.bytes_needed = self._bytes_needed(len(u_k))
+        sizes = (self.n_sources, self.n_subsources, len(u_k), n, m, len(z) * substeps, self.chunk)
+        self.bytes_needed = model_bytes(*sizes, self.cdtype, self.memory_mb)
         fits_memory(self.bytes_needed, max_bytes, nv * px, len(z))
         # --- propagation through the volume, per source point: exp(i2π δ [η(u + w) − η(w)]) (Eq. 6)
         h_slab = slab_propagators(w, n, self.dx, self.delta, nm, lam)
@@ -255,17 +257,6 @@ class ViewsMultislice(ViewsAdjoint):
         i0 = self._interpolate(self._intensity(None)[0])  # sample-free views: constant per lenslet
         self.i0 = lit_views(np.asarray(self.bk.to_host(i0.mean(axis=(1, 2))), float))
         self._i0 = xp_.asarray(self.i0.astype(self.rdtype))[:, None, None]
-
-    def _bytes_needed(self, lenslets: int) -> int:
-        """Peak memory of :meth:`misfit`, bytes: the kept fields (up to ``memory_mb``), the lenslet
-        fields of every sub-point, the kept crop kernels, the propagators and one chunk's temporaries."""
-        c = self.cdtype.itemsize
-        s, q, n, m = self.n_sources, self.n_subsources, self.n, self.m
-        pairs = s * q * lenslets * m * m * c
-        fields = min(self.shape[0] * self.substeps * s * n * n * c, self.memory_mb * 2**20)
-        kernels = pairs if pairs <= self.memory_mb * 2**18 else 0
-        temporaries = self.chunk * (4 * q * lenslets * m * m + 6 * n * n) * c
-        return int(fields + pairs + kernels + 3 * s * n * n * c + temporaries)
 
     def set_pupil_phase(self, zernike, defocus_k) -> None:
         """Give the pupil other phase terms; its apertures, the source points and the direct light

@@ -78,6 +78,8 @@ class DpcResult:
         3D: Δn against the medium on the planes ``z_um``.
     z_um : ndarray, (Z,)
         The planes, µm (``[0]`` in 2D).
+    dz_um : float
+        Their spacing (the slab thickness), µm.
     pixel_um : float
         Object-side pixel, µm.
     method : str
@@ -89,6 +91,7 @@ class DpcResult:
     phase: np.ndarray | None
     delta_n: np.ndarray | None
     z_um: np.ndarray
+    dz_um: float
     pixel_um: float
     method: str
     report: dict = field(default_factory=dict)
@@ -199,5 +202,5 @@ def reconstruct_dpc(
     sol = built.solve(data, progress=progress)
     if optics.is_stack:
         dn = sol.phase * (optics.wavelength_um / (2 * math.pi * s.dz_um))  # Δn = λφ/(2π dz)
-        return DpcResult(None, dn.astype(np.float32), z_um, views.pixel_um, method, dict(sol.report))
-    return DpcResult(sol.phase[0], None, z_um, views.pixel_um, method, dict(sol.report))
+        return DpcResult(None, dn.astype(np.float32), z_um, s.dz_um, views.pixel_um, method, dict(sol.report))
+    return DpcResult(sol.phase[0], None, z_um, s.dz_um, views.pixel_um, method, dict(sol.report))

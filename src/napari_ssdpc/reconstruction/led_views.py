@@ -130,18 +130,17 @@ class LedViews:
             focus_um=np.tile(o.focal_planes_um, len(o.patterns_deg)),
         )
 
-    def __call__(self, stack) -> np.ndarray:
-        """The stack's images as views whose direct light is 1.
+    def check(self, stack) -> np.ndarray:
+        """The stack as (K, ny, nx) float64 images, refused in one line where it does not fit the optics.
 
         Parameters
         ----------
         stack : array_like, (P, ny, nx) or (P, F, ny, nx)
-            One image per pattern in the order of ``patterns_deg`` (each a z-stack in the order
-            of ``z_um``), camera units.
+            As :meth:`__call__`.
 
         Returns
         -------
-        ndarray, float32, (K, ny, nx)
+        ndarray, float64, (K, ny, nx)
 
         Raises
         ------
@@ -166,6 +165,28 @@ class LedViews:
         if np.any(means <= 0) or np.any(a.min(axis=(-2, -1)) < -0.5 * means):
             k = int(np.argmin(means))
             raise SsdpcError(f"image {k} of the stack is dark (mean {means[k]:.3g}); check the exposure and the order")
+        return a
+
+    def __call__(self, stack) -> np.ndarray:
+        """The stack's images as views whose direct light is 1.
+
+        Parameters
+        ----------
+        stack : array_like, (P, ny, nx) or (P, F, ny, nx)
+            One image per pattern in the order of ``patterns_deg`` (each a z-stack in the order
+            of ``z_um``), camera units.
+
+        Returns
+        -------
+        ndarray, float32, (K, ny, nx)
+
+        Raises
+        ------
+        SsdpcError
+            As :meth:`check`.
+        """
+        a = self.check(stack)
+        means = a.mean(axis=(-2, -1))
         size = min(self.shape) // 2
         out = np.empty(a.shape, np.float32)
         for k, im in enumerate(a):

@@ -99,11 +99,10 @@ class DpcWidget(StepWidget):
             kwargs = {"name": f"{source} phase", "scale": (px, px), "units": ("µm", "µm"), "colormap": "gray"}
             show_layer(self.viewer, r.phase, kwargs | {"metadata": {"unit": "rad"}})
             return f"{source}: phase {r.phase.min():+.2f} .. {r.phase.max():+.2f} rad ({r.method})"
-        dz = float(r.z_um[1] - r.z_um[0]) if len(r.z_um) > 1 else 1.0
         ri = optics.medium_index + r.delta_n
         kwargs = {
             "name": f"{source} RI",
-            "scale": (dz, px, px),
+            "scale": (r.dz_um, px, px),
             "translate": (float(r.z_um[0]), 0.0, 0.0),
             "units": ("µm", "µm", "µm"),
             "colormap": "magma",
