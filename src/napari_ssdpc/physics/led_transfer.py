@@ -22,7 +22,31 @@ from napari_ssdpc.physics.pupil import eta, soft_disk
 from napari_ssdpc.physics.transfer import fft_indices, weak_object_transfer_functions, zero_padded
 from napari_ssdpc.settings.dpc_optics import DpcOptics
 
-__all__ = ["LedPatterns", "led_source_points"]
+__all__ = ["LedPatterns", "half_plane", "led_source_points"]
+
+
+def half_plane(wx, wy, angles_deg, step: float) -> np.ndarray:
+    """The share of each source sample in each pattern's half: the side of the disk its angle points
+    to (w·(cos θ, sin θ) ≥ 0), a linear ramp one sample wide across the edge line (a sample on it
+    counts half).
+
+    Parameters
+    ----------
+    wx, wy : array_like
+        Source frequencies, cycles/µm (broadcastable).
+    angles_deg : sequence of float
+        The patterns' angles, degrees (``patterns_deg``).
+    step : float
+        The samples' spacing, cycles/µm.
+
+    Returns
+    -------
+    ndarray, (P, ...)
+        In [0, 1], one leading entry per pattern.
+    """
+    wx, wy = np.broadcast_arrays(np.asarray(wx, float), np.asarray(wy, float))
+    t = np.radians(np.asarray(angles_deg, float)).reshape(-1, *([1] * wx.ndim))
+    return np.clip(0.5 + (wx * np.cos(t) + wy * np.sin(t)) / step, 0.0, 1.0)
 
 
 class LedPatterns:
@@ -54,12 +78,7 @@ class LedPatterns:
         wy = (fft_indices(m_in[0]) * du[0])[:, None]
         wx = (fft_indices(m_in[1]) * du[1])[None, :]
         disk = soft_disk(np.hypot(wx, wy), optics.source_radius, step)
-        halves = []
-        for angle in optics.patterns_deg:
-            t = math.radians(angle)
-            # the side of the disk the angle points to; the samples on its edge line count half
-            halves.append(disk * np.clip(0.5 + (wx * math.cos(t) + wy * math.sin(t)) / step, 0.0, 1.0))
-        self.src = np.stack(halves)  # (P, My, Mx)
+        self.src = disk * half_plane(wx, wy, optics.patterns_deg, step)  # (P, My, Mx)
         self.pupil = soft_disk(np.hypot(wx, wy), optics.cutoff, step).astype(complex)
         self.eta = eta(wx**2 + wy**2, optics.medium_index, optics.wavelength_um).real
         self.norm = self.src.sum(axis=(-2, -1))  # each pattern's source power
@@ -140,9 +159,6 @@ def led_source_points(optics: DpcOptics, h: float, q: int):
     w, w_sub = disk_points(optics.source_radius, h, q)
     step = h / q
     cell = disk_fraction(w_sub[..., 0], w_sub[..., 1], optics.source_radius, step) * step * step
-    halves = [
-        np.clip(0.5 + (w_sub[..., 0] * math.cos(a) + w_sub[..., 1] * math.sin(a)) / step, 0.0, 1.0)
-        for a in np.radians(optics.patterns_deg)
-    ]
-    wgt = np.repeat(np.stack(halves, axis=-1) * cell[..., None], len(optics.focal_planes_um), axis=-1)
+    halves = np.moveaxis(half_plane(w_sub[..., 0], w_sub[..., 1], optics.patterns_deg, step), 0, -1)  # (S, Q, P)
+    wgt = np.repeat(halves * cell[..., None], len(optics.focal_planes_um), axis=-1)
     return w, w_sub, wgt

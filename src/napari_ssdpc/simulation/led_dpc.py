@@ -18,6 +18,7 @@ import math
 import numpy as np
 
 from napari_ssdpc.backend import cpu
+from napari_ssdpc.physics.led_transfer import half_plane
 from napari_ssdpc.physics.pupil import eta, soft_disk
 from napari_ssdpc.physics.waves import defocus_factor
 from napari_ssdpc.settings.dpc_optics import DpcOptics
@@ -84,12 +85,7 @@ def simulate_dpc_stack(
         for i in range(-r, r + 1):
             w = np.array([i, j]) * step * grid.du
             cell = soft_disk(np.hypot(*w), optics.source_radius, step * grid.du)
-            weights = np.array(
-                [
-                    cell * np.clip(0.5 + (w @ (math.cos(t), math.sin(t))) / (step * grid.du), 0.0, 1.0)
-                    for t in np.radians(optics.patterns_deg)
-                ]
-            )
+            weights = cell * half_plane(w[0], w[1], optics.patterns_deg, step * grid.du)  # (P,)
             if not weights.any():
                 continue
             spec = cpu().fft2(slabs.embed(slabs.exit_envelope(w), n))
