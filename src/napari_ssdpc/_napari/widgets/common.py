@@ -154,10 +154,11 @@ def show_in_turns(viewer, layers) -> None:
     """
     from qtpy.QtCore import QTimer
 
-    first, *rest = list(layers) or [None]
-    if first is None:
+    layers = list(layers)
+    if not layers:
         return
-    show_layer(viewer, *first)
+    show_layer(viewer, *layers[0])
+    rest = layers[1:]
     if not rest:
         return
     session = session_for(viewer)
