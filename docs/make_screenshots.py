@@ -41,12 +41,15 @@ class StallMeter:
         self.last = now
 
 
-def wait_for(app, runner, timeout_s=600):
-    """Process Qt events until the widget's job has finished."""
+def wait_for(app, runner=None, timeout_s=600):
+    """Process Qt events until the widget's job has finished (when given) and what waits for a
+    turn of the event loop of its own is shown."""
     import time
 
+    from napari_ssdpc._napari import turns
+
     t0 = time.perf_counter()
-    while runner.worker is not None:
+    while (runner is not None and runner.worker is not None) or turns.pending():
         app.processEvents()
         time.sleep(0.02)
         if time.perf_counter() - t0 > timeout_s:
@@ -90,7 +93,7 @@ def main():
     t0 = time.perf_counter()
     stalls.label = "opening the sample"
     viewer.open_sample("napari-ssdpc", "pmma_bead")
-    app.processEvents()
+    wait_for(app)
     times["sample open"] = time.perf_counter() - t0
     stalls.label = "adopting the sample's optics"
     viewer.layers.selection.active = viewer.layers["PMMA bead"]

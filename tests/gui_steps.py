@@ -9,17 +9,22 @@ WORKER_TIMEOUT_MS = 180_000
 
 
 def wait_for(qtbot, widget):
-    """Wait until the widget's running job has finished and its layers are all shown (a job's layers
-    come one per turn of the event loop)."""
-    from napari_ssdpc._napari.widgets.session import session_for
-
+    """Wait until the widget's running job has finished and what it shows is all shown (layers and
+    plots come one per turn of the event loop)."""
     worker = widget.runner.worker
     if worker is not None:
         with qtbot.waitSignal(worker.finished, timeout=WORKER_TIMEOUT_MS):
             pass
     qtbot.waitUntil(lambda: widget.runner.worker is None, timeout=5000)
-    session = session_for(widget.viewer)
-    qtbot.waitUntil(lambda: session.pending_layers == 0, timeout=5000)
+    wait_for_turns(qtbot)
+
+
+def wait_for_turns(qtbot):
+    """Wait until what waits for a turn of the event loop of its own is all done (the layers of a
+    sample, a job or a store, the plots)."""
+    from napari_ssdpc._napari import turns
+
+    qtbot.waitUntil(lambda: turns.pending() == 0, timeout=10_000)
 
 
 def prepare_bead(viewer, qtbot, widgets, optics, z, dz):

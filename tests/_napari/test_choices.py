@@ -37,18 +37,20 @@ def _ri(viewer, name: str, value: float):
     return viewer.add_image(data, **kwargs)
 
 
-def test_the_sample_opened_after_the_dock_gives_the_raw_flat_and_white_defaults(dock):
+def test_the_sample_opened_after_the_dock_gives_the_raw_flat_and_white_defaults(dock, qtbot):
     viewer, w = dock
     assert w["reconstruct"].raw.value is None and w["calibrate"].image.value is None
-    viewer.open_sample("napari-ssdpc", "pmma_bead")  # white, flat, then the bead frame
+    viewer.open_sample("napari-ssdpc", "pmma_bead")  # the bead frame, then its flat and white
+    _steps.wait_for_turns(qtbot)  # its flat and white frames come on turns of their own
     assert w["calibrate"].image.value.name == "PMMA bead white"
     assert w["reconstruct"].raw.value.name == "PMMA bead"
     assert w["reconstruct"].flat.value.name == "PMMA bead flat"
 
 
-def test_the_flat_follows_the_recording_of_the_raw_frame(dock):
+def test_the_flat_follows_the_recording_of_the_raw_frame(dock, qtbot):
     viewer, w = dock
     viewer.open_sample("napari-ssdpc", "pmma_bead")
+    _steps.wait_for_turns(qtbot)  # its flat and white frames come on turns of their own
     rc = w["reconstruct"]
     # a second recording of another camera region: its flat only fits its own frames
     viewer.add_image(np.ones((64, 80), np.uint16), name="cells flat")
@@ -61,9 +63,10 @@ def test_the_flat_follows_the_recording_of_the_raw_frame(dock):
     assert rc.raw.value.name == "PMMA bead"  # the user's pick stays while it exists
 
 
-def test_the_users_flat_choice_stays_until_its_layer_goes(dock):
+def test_the_users_flat_choice_stays_until_its_layer_goes(dock, qtbot):
     viewer, w = dock
     viewer.open_sample("napari-ssdpc", "pmma_bead")
+    _steps.wait_for_turns(qtbot)  # its flat and white frames come on turns of their own
     rc = w["reconstruct"]
     rc.flat.value = None  # "none (model)" chosen on purpose
     viewer.add_image(np.ones((1024, 1024), np.uint16), name="PMMA bead flat 2")
@@ -76,6 +79,7 @@ def test_the_users_flat_choice_stays_until_its_layer_goes(dock):
 def test_method_takes_the_newest_calibration(dock, qtbot):
     viewer, w = dock
     viewer.open_sample("napari-ssdpc", "pmma_bead")
+    _steps.wait_for_turns(qtbot)  # its flat and white frames come on turns of their own
     w["calibrate"].run()
     _steps.wait_for(qtbot, w["calibrate"])
     assert w["method"].calibration.value.name == "PMMA bead white EI circles"
@@ -89,9 +93,10 @@ def test_method_takes_the_newest_calibration(dock, qtbot):
     assert w["method"].calibration.value.name == "PMMA bead white EI circles"
 
 
-def test_profile_slices_and_movie_follow_the_newest_ri(dock):
+def test_profile_slices_and_movie_follow_the_newest_ri(dock, qtbot):
     viewer, w = dock
     viewer.open_sample("napari-ssdpc", "pmma_bead")
+    _steps.wait_for_turns(qtbot)  # its flat and white frames come on turns of their own
     assert w["profile"].image.value.name == "PMMA bead"  # no result yet: a frame
     _ri(viewer, "first", 1.5)
     for tab in ("profile", "slices", "movie"):

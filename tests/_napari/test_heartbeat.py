@@ -48,13 +48,13 @@ def _busy() -> str:
 
 @pytest.fixture
 def busy_neighbour():
-    """A process per core spinning for as long as the test runs."""
+    """A process per core spinning for as long as the test runs (and no longer than the test's own
+    process: a spinner ends when its parent has gone)."""
     import subprocess
     import sys
 
-    spinners = [
-        subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(os.cpu_count() or 1)
-    ]  # fmt: skip
+    spin = f"import os\nwhile os.getppid() == {os.getpid()}: pass"
+    spinners = [subprocess.Popen([sys.executable, "-c", spin]) for _ in range(os.cpu_count() or 1)]
     time.sleep(1.0)  # every core busy before the walk starts
     yield len(spinners)
     for p in spinners:
@@ -153,6 +153,7 @@ def _walk(make_napari_viewer, qtbot, monkeypatch, tmp_path, skip_slow_display=Fa
         qtbot.wait(50)
         if widget is not None:
             _steps.wait_for(qtbot, widget)
+        _steps.wait_for_turns(qtbot)
         qtbot.wait(settle_ms)
 
     run("open the dock", lambda: out.update(dock=viewer.window.add_plugin_dock_widget("napari-ssdpc", "ssDPC")[1]))

@@ -17,6 +17,7 @@ def test_fit_the_optics_in_the_calibrate_tab(make_napari_viewer, qtbot, monkeypa
     viewer = make_napari_viewer()
     dock = viewer.window.add_plugin_dock_widget("napari-ssdpc", "ssDPC")[1]
     viewer.open_sample("napari-ssdpc", "pmma_bead")
+    _steps.wait_for_turns(qtbot)  # its flat and white frames come on turns of their own
     calibrate, method = dock.tabs["Calibrate"], dock.tabs["Method"]
     calibrate.run()
     _steps.wait_for(qtbot, calibrate)

@@ -14,6 +14,7 @@ from napari_ssdpc.settings.parts import MLA, Objective, Sensor
 pytest.importorskip("napari")
 pytest.importorskip("pytestqt")
 
+import gui_steps as _steps
 from napari_ssdpc._napari import widgets as _widgets
 from napari_ssdpc._napari.widgets.optics import OPTICS_FIELDS, optics_field
 
@@ -69,7 +70,7 @@ def test_the_widget_shows_the_short_design_table(make_napari_viewer):
 
 
 @pytest.mark.parametrize("dock_first", [True, False], ids=["dock, then sample", "sample, then dock"])
-def test_the_sample_brings_its_own_optics(make_napari_viewer, monkeypatch, tmp_path, dock_first):
+def test_the_sample_brings_its_own_optics(make_napari_viewer, qtbot, monkeypatch, tmp_path, dock_first):
     """The bead sample is simulated at condenser NA 0.3 (the paper optics have 0.1) on a 1024 px
     region: opening it makes those the optics, in either order, and the tabs show them; the z range,
     method and α set before stay."""
@@ -87,6 +88,7 @@ def test_the_sample_brings_its_own_optics(make_napari_viewer, monkeypatch, tmp_p
         op.z_min.value, op.z_max.value, op.dz.value, op.method.value = -12.0, 18.0, 3.0, "wotf"
         rc.alpha.value = 0.05
     viewer.open_sample("napari-ssdpc", "pmma_bead")
+    _steps.wait_for_turns(qtbot)  # its flat and white frames come on turns of their own
     if not dock_first:
         _, dock = viewer.window.add_plugin_dock_widget("napari-ssdpc", "ssDPC")
     else:  # the user's settings stay

@@ -25,6 +25,7 @@ def built(make_napari_viewer, qtbot, monkeypatch):
     _, dock = viewer.window.add_plugin_dock_widget("napari-ssdpc", "ssDPC")
     w = {k.lower(): v for k, v in dock.tabs.items()}
     viewer.open_sample("napari-ssdpc", "pmma_bead")
+    _steps.wait_for_turns(qtbot)  # its flat and white frames come on turns of their own
     w["optics"].set_optics(_sample_data.bead_frames()[3])
     w["calibrate"].run()
     _steps.wait_for(qtbot, w["calibrate"])

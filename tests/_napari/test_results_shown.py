@@ -56,8 +56,10 @@ def test_contrast_limits_span_the_strongest_object_inside_the_field():
 pytest.importorskip("napari")
 pytest.importorskip("pytestqt")
 
+import gui_steps as _steps  # noqa: E402  (the GUI tests below need napari)
 
-def test_a_result_opened_from_a_file_is_brought_into_view_in_um(make_napari_viewer, tmp_path):
+
+def test_a_result_opened_from_a_file_is_brought_into_view_in_um(make_napari_viewer, qtbot, tmp_path):
     """File › Open of a result, no dock open: the frames are hidden, the view fits the volume, the
     scale bar is on and every layer is in µm."""
     from napari_ssdpc._napari import writer as _writer
@@ -65,6 +67,7 @@ def test_a_result_opened_from_a_file_is_brought_into_view_in_um(make_napari_view
 
     viewer = make_napari_viewer()
     viewer.open_sample("napari-ssdpc", "pmma_bead")
+    _steps.wait_for_turns(qtbot)  # its flat and white frames come on turns of their own
     optics = Optics.from_dict(viewer.layers["PMMA bead"].metadata["ssdpc"]["optics"])
     data, kw, _ = result_layer(
         _bead_volume(), "ri", VOXEL, ORIGIN, name="bead", info={"optics": optics.to_dict(), "source": "PMMA bead"}
@@ -87,12 +90,13 @@ def test_a_result_opened_from_a_file_is_brought_into_view_in_um(make_napari_view
     assert status["coordinates"].endswith(f": {truth:.4f}")
 
 
-def test_a_sample_opened_beside_other_layers_is_fitted_to_the_view(make_napari_viewer):
+def test_a_sample_opened_beside_other_layers_is_fitted_to_the_view(make_napari_viewer, qtbot):
     """napari fits the view to a viewer's first layers only: the bead sample opened after a large
     image was left far off view."""
     viewer = make_napari_viewer()
     viewer.add_image(np.zeros((64, 64), np.float32), scale=(200.0, 200.0), name="a large field")  # 12.8 mm
     [*_, bead] = viewer.open_sample("napari-ssdpc", "pmma_bead")
+    _steps.wait_for_turns(qtbot)  # its flat and white frames come on turns of their own
     assert bead.name == "PMMA bead"
     assert _camera(viewer).zoom == pytest.approx(_fitted_zoom(viewer, bead), rel=1e-3)
 

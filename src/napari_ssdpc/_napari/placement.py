@@ -11,9 +11,11 @@ every elementary image appears at the scale of the volume.
 from __future__ import annotations
 
 import weakref
+from functools import partial
 
 import numpy as np
 
+from napari_ssdpc._napari.turns import later
 from napari_ssdpc.settings.optics import Optics
 
 __all__ = [
@@ -198,7 +200,7 @@ def follow_results(viewer=None) -> None:
             return
         precise_status(layer)
         if not any(_is_result(lyr) for lyr in v.layers if lyr is not layer):
-            show_first_result(v, layer)
+            later(partial(show_first_result, v, layer))  # on a turn after napari's adding of the layer
 
     viewer.layers.events.inserted.connect(arrived)
 

@@ -22,12 +22,13 @@ reads a stale file.
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from napari_ssdpc import __version__
-from napari_ssdpc._napari import sample_cache
+from napari_ssdpc._napari import sample_cache, turns
 from napari_ssdpc._napari.placement import fit_view, frame_transform
 
 #: Sample frames shipped with the package (``ship_frames``): the samples open at once.
@@ -83,6 +84,39 @@ def _fit_view_on_arrival() -> None:
 def _contrast(frame) -> list[float]:
     lo, hi = np.percentile(np.asarray(frame)[::4, ::4], [1, 99.9])
     return [float(lo), float(max(hi, lo + 1))]
+
+
+def _rest_in_turns(layers: list) -> list:
+    """A sample's layers as File › Open Sample hands them to napari, which adds them all in one
+    event: the last (the raw frame, shown) is left to napari; the others (the hidden flat and white
+    frames) are put below it, each on a turn of the event loop of its own (:mod:`.turns`). Without
+    a viewer, all of them."""
+    import napari
+
+    viewer = napari.current_viewer()
+    if viewer is None:
+        return layers
+    for data, kwargs, kind in reversed(layers[:-1]):
+        turns.later(partial(_insert_below, viewer, data, kwargs, kind))
+    return layers[-1:]
+
+
+def _insert_below(viewer, data, kwargs: dict, kind: str) -> None:
+    from napari.layers import Layer
+
+    viewer.layers.insert(0, Layer.create(data, kwargs, kind))
+
+
+def open_pmma_bead() -> list:
+    """File › Open Sample › PMMA bead: :func:`pmma_bead_sample`, its flat and white frames on turns
+    of their own."""
+    return _rest_in_turns(pmma_bead_sample())
+
+
+def open_moving_sample() -> list:
+    """File › Open Sample › moving sample: :func:`moving_sample_series`, its flat and white frames
+    on turns of their own."""
+    return _rest_in_turns(moving_sample_series())
 
 
 # ---------------------------------------------------------------------------- bead

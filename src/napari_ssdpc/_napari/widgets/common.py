@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import warnings
 import weakref
+from functools import partial
 
 import numpy as np
 from magicgui.widgets import Container, Label, PushButton
 
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.placement import frame_transform, place_frames
+from napari_ssdpc._napari.turns import later
 from napari_ssdpc._napari.widgets.session import session_for
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 
@@ -141,10 +143,9 @@ def show_layer(viewer, data, kwargs: dict, layer_type: str = "image"):
 
 
 def show_in_turns(viewer, layers) -> None:
-    """Show layers one per turn of the event loop, the first at once: napari adding several layers
-    in one event (a calibration's circles, labelled centres and deviations) stalls the GUI for their
-    sum; between turns it draws and answers. The session counts the layers still to come
-    (``pending_layers``).
+    """Show layers one per turn of the event loop (:func:`..turns.later`): napari adding several
+    layers in one event (a calibration's circles, labelled centres and deviations; a result's
+    quantities) stalls the GUI for their sum; between turns it draws and answers.
 
     Parameters
     ----------
@@ -152,26 +153,8 @@ def show_in_turns(viewer, layers) -> None:
     layers : list of (data, kwargs, type)
         As :func:`show_layer` takes them.
     """
-    from qtpy.QtCore import QTimer
-
-    layers = list(layers)
-    if not layers:
-        return
-    show_layer(viewer, *layers[0])
-    rest = layers[1:]
-    if not rest:
-        return
-    session = session_for(viewer)
-    session.pending_layers += 1
-
-    def next_turn():
-        session.pending_layers -= 1
-        try:
-            show_in_turns(viewer, rest)
-        except RuntimeError:  # the viewer was closed meanwhile
-            pass
-
-    QTimer.singleShot(0, next_turn)
+    for layer in layers:
+        later(partial(show_layer, viewer, *layer))
 
 
 def catching_warnings(fn, *args, **kwargs):

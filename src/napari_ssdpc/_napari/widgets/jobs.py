@@ -16,15 +16,17 @@ import queue
 import threading
 import time
 from dataclasses import dataclass
+from functools import partial
 
 from magicgui.widgets import Label, PushButton
 from napari.qt.threading import create_worker
 from napari.utils import progress as napari_progress
 
 from napari_ssdpc._napari import notify
+from napari_ssdpc._napari.turns import later
 from napari_ssdpc.errors import SsdpcError, SsdpcWarning
 
-__all__ = ["PROGRESS_EVERY_S", "JobRunner", "Outcome", "Partial"]
+__all__ = ["PROGRESS_EVERY_S", "JobRunner", "Outcome", "Partial", "start_helper"]
 
 #: Shortest time between two progress updates on screen, s (the last step of a stage always shows).
 PROGRESS_EVERY_S = 0.25
@@ -50,6 +52,27 @@ def _stop_jobs() -> None:
         stop.set()
     for thread, _ in list(_RUNNING):
         thread.join(timeout=30.0)
+
+
+def start_helper(target, name: str) -> threading.Thread:
+    """Start ``target()`` in a daemon thread that the interpreter's exit waits for (a short read
+    off the GUI thread; a thread torn down inside a C library aborts the exit).
+
+    Parameters
+    ----------
+    target : callable
+    name : str
+        The thread's name.
+
+    Returns
+    -------
+    threading.Thread
+    """
+    _RUNNING.difference_update({r for r in _RUNNING if r[0].name == name and not r[0].is_alive()})  # done before
+    thread = threading.Thread(target=target, name=name, daemon=True)
+    _RUNNING.add((thread, threading.Event()))
+    thread.start()
+    return thread
 
 
 @dataclass
@@ -125,7 +148,6 @@ class JobRunner:
         self.worker = None
         self._stop = None
         self._pbar = None
-        self._in_update = False
         self._on_partial = None
         self._shown_at = 0.0
         self._gone = False
@@ -202,16 +224,17 @@ class JobRunner:
             return  # a repaint of napari's progress bar costs the GUI thread: a few a second are enough
         self._shown_at = now
         self.status.value = f"{label} {done}/{total}" if total else label
-        if self._in_update:  # napari's progress bar may process events while it repaints
+        # napari's progress bar processes events while it repaints: on a turn of its own, so that
+        # nothing else that waits is run inside it
+        later(partial(self._show_progress, pbar, done, total, label), key=(self, "progress"))
+
+    def _show_progress(self, pbar, done: int, total: int, label: str) -> None:
+        if pbar is not self._pbar:  # its job has ended meanwhile: the bar is closed
             return
-        self._in_update = True
-        try:
-            if pbar.total != total:
-                pbar.total = total
-            pbar.set_description(label)
-            pbar.update(done - pbar.n)
-        finally:
-            self._in_update = False
+        if pbar.total != total:
+            pbar.total = total
+        pbar.set_description(label)
+        pbar.update(done - pbar.n)
 
     def _show_partial(self, value):
         if self._on_partial is None or (self._stop is not None and self._stop.is_set()):

@@ -19,6 +19,7 @@ from magicgui.widgets import FileEdit, FloatSpinBox, PushButton
 from qtpy.QtCore import QTimer
 
 from napari_ssdpc._napari import notify
+from napari_ssdpc._napari.store_view import StoreView
 from napari_ssdpc.errors import Cancelled, SsdpcError
 
 __all__ = ["LIVE_MS", "LiveFollow", "latency_text"]
@@ -85,6 +86,7 @@ class LiveFollow:
         self.written_s: dict[int, float] = {}
         self.shown_s: dict[int, float] = {}
         self._timer = None
+        self._summary = None  # (store, report, idle_s) of the run that ended
 
     def start(self):
         """Follow the chosen recording into the chosen store (the message says why not, if it cannot).
@@ -118,9 +120,10 @@ class LiveFollow:
         if worker is None:
             return None
         self.button.enabled = False
-        rc.shown_frames = -1
+        self._summary = None
+        rc.store_view = StoreView(rc.viewer, on_shown=self._shown)
         self._timer = QTimer()
-        self._timer.timeout.connect(lambda: self.show(Path(store)))
+        self._timer.timeout.connect(lambda: rc.store_view.refresh(Path(store)))
         self._timer.start(LIVE_MS)
         worker.finished.connect(lambda: self._ended(Path(store)))
         return worker
@@ -159,38 +162,31 @@ class LiveFollow:
 
         return work
 
-    def show(self, store: Path) -> None:
-        """Show the store's frames written so far; note when each new frame of this run is shown.
-
-        Parameters
-        ----------
-        store : Path
-            The OME-Zarr store being written.
-        """
-        from napari_ssdpc.io.store import done_frames
-
-        try:  # the frames the display below can show (none while the store is being created)
-            done = [int(t) for t in done_frames(store)] if Path(store).exists() else []
-        except Exception:  # a store half created by the worker: nothing done yet, shown on the next beat
-            done = []
-        before = self.rc.shown_frames
-        self.rc.show_store(store)
+    def _shown(self, done: list[int]) -> None:
+        """The store's layers holding the frames ``done`` were just shown: each new frame of this
+        run that was written is noted as shown now; the run's summary, once it has ended, follows."""
         source = self.source
-        if source is None or self.rc.shown_frames == before:
-            return
-        now = time.time()  # after the display, and after every write time counted below was taken
-        new = [t for t in done if t in self.written_s and t not in self.shown_s]
-        for t in new:
-            self.shown_s[t] = now - source.arrived_at[t]
-        if new and self.rc.runner.running:
-            t = new[-1]
-            self.rc.status.value = f"{source.path.name}: frame {t} shown {self.shown_s[t]:.2f} s after it was on disk"
+        if source is not None:
+            now = time.time()  # after the display, and after every write time counted below was taken
+            new = [t for t in done if t in self.written_s and t not in self.shown_s]
+            for t in new:
+                self.shown_s[t] = now - source.arrived_at[t]
+            if new and self.rc.runner.running:
+                t = new[-1]
+                self.rc.status.value = f"{source.path.name}: frame {t} shown {self.shown_s[t]:.2f} s after on disk"
+        if self._summary is not None and not self.rc.runner.running:
+            self.rc.status.value = self._summary_text()
 
     def _followed(self, job, rec, report, idle_s: float, store: Path) -> str:
         """The job's end (no new frame for the idle time): operators kept, last frames shown, latency."""
         self.rc.session.built = (job, rec)
         self.rc.session.operators_built.emit(rec)
-        self.show(store)
+        self._summary = (store, report, idle_s)
+        self.rc.store_view.refresh(store)  # the summary again once the last frames are shown
+        return self._summary_text()
+
+    def _summary_text(self) -> str:
+        store, report, idle_s = self._summary
         return (
             f"{store.name}: {report.written} new frames, {report.frames} in all ({report.skipped} done before); "
             f"latency from frame on disk to volume written {latency_text(self.written_s.values())}, to layer shown "
@@ -202,5 +198,5 @@ class LiveFollow:
         if self._timer is not None:
             self._timer.stop()
             self._timer = None
-        self.show(store)
+        self.rc.store_view.refresh(store)
         self.button.enabled = True

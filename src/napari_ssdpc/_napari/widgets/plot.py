@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import threading
 
+from napari_ssdpc._napari import turns
+
 __all__ = ["Deferred", "LazyFigure", "preload_matplotlib"]
 
 
@@ -34,7 +36,8 @@ def preload_matplotlib() -> threading.Thread:
 
 
 class Deferred:
-    """Call ``fn`` once, on the next turn of the event loop, however often it is asked before then.
+    """Call ``fn`` once, on a turn of the event loop of its own (:func:`..turns.later`), however
+    often it is asked before then.
 
     Parameters
     ----------
@@ -44,25 +47,16 @@ class Deferred:
 
     def __init__(self, fn):
         self.fn = fn
-        self.pending = False
 
     def __call__(self, *_) -> None:
         """Ask for a call (event arguments are ignored)."""
-        if not self.pending:
-            from qtpy.QtCore import QTimer
-
-            self.pending = True
-            QTimer.singleShot(0, self.flush)
+        turns.later(self.fn, key=self)
 
     def flush(self) -> None:
         """Make the pending call now (nothing when none is pending)."""
-        if not self.pending:
-            return
-        self.pending = False
-        try:
-            self.fn()
-        except RuntimeError:  # the widget was closed and its Qt objects deleted
-            pass
+        fn = turns.take(self)
+        if fn is not None:
+            fn()
 
 
 class LazyFigure:
@@ -106,6 +100,7 @@ class LazyFigure:
         return self.figure.canvas
 
     def draw(self) -> None:
-        """Redraw the canvas when Qt is next idle (nothing when no figure was made)."""
+        """Redraw the canvas now (nothing when no figure was made): the callers draw on a turn of
+        their own, where matplotlib's own deferred draw would join whatever Qt runs next."""
         if self._canvas is not None:
-            self._canvas.draw_idle()
+            self._canvas.draw()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +11,8 @@ from qtpy.QtCore import QTimer
 
 from napari_ssdpc._napari import notify
 from napari_ssdpc._napari.layers import axial_fwhm_um, resolution_text, result_arrays, result_layer
+from napari_ssdpc._napari.store_view import StoreView
+from napari_ssdpc._napari.turns import later
 from napari_ssdpc._napari.widgets.camera import LiveCamera
 from napari_ssdpc._napari.widgets.choices import (
     LayerChoice,
@@ -23,7 +26,7 @@ from napari_ssdpc._napari.widgets.common import (
     frame_index,
     region_um,
     run_buttons,
-    show_layer,
+    show_in_turns,
 )
 from napari_ssdpc._napari.widgets.jobs import JobRunner
 from napari_ssdpc._napari.widgets.live import LiveFollow
@@ -130,7 +133,7 @@ class ReconstructWidget(StepWidget):
             ]
         )
         self.runner = JobRunner("Reconstruct", self.run_button, self.cancel_button, self.status)
-        self._watch, self.shown_frames = None, -1  # the store being written, shown as it grows
+        self._watch, self.store_view = None, StoreView(napari_viewer)  # a store being written, shown as it grows
         self.run_button.changed.connect(self.run)
         self.session.optics_loaded.connect(self._defaults)
         self.session.settings_loaded.connect(self.show_settings)
@@ -239,22 +242,18 @@ class ReconstructWidget(StepWidget):
 
     def _first(self, source, rec, res, info, layers):
         """Show the first answer (the layers the result will replace) while the method works."""
-        before = {lyr.name: lyr.data for lyr in self.viewer.layers}
-        shown = self._show(layers)
-        self._replaced = {name: before.get(name) for name in shown}
+        current = {lyr.name: lyr.data for lyr in self.viewer.layers}
+        self._replaced = {kw["name"]: current.get(kw["name"]) for _, kw, _ in layers}
+        show_in_turns(self.viewer, layers)
         return f"{source}: first answer shown ({res.settings['first_answer']}); {rec.method.name} working…"
 
     def _take_back_first(self) -> None:
         """A job cancelled or failed after its first answer was shown: its layers go back to what
-        they were (removed where they are new); a first answer is never left as the result."""
+        they were (removed where they are new); a first answer is never left as the result. On a
+        turn after the first answer's own (:func:`..turns.later`)."""
         replaced, self._replaced = self._replaced, None
-        for name, data in (replaced or {}).items():
-            if name not in self.viewer.layers:
-                continue
-            if data is None:
-                self.viewer.layers.remove(name)
-            else:
-                self.viewer.layers[name].data = data
+        if replaced:
+            later(partial(_put_back, self.viewer, replaced))
 
     def _stream(self, layer, job, built, store: Path):
         """Every frame of a series into the OME-Zarr ``store``, shown from disk as frames finish."""
@@ -268,69 +267,70 @@ class ReconstructWidget(StepWidget):
 
         def work(progress, should_stop):
             pipeline = Pipeline(job, reconstructor=built, progress=progress)
-            pipeline.run(
+            report = pipeline.run(
                 frames,
                 sink,
                 progress=False,
                 should_stop=should_stop,
                 on_frame=lambda t, done, total, _res: progress(done, total, f"frame {t} written to {store.name}"),
             )
-            return pipeline.reconstructor
+            return pipeline.reconstructor, report
 
-        worker = self.runner.start(work, lambda rec: self._streamed(job, rec, store), "Reconstruct")
+        worker = self.runner.start(work, lambda r: self._streamed(job, *r, store), "Reconstruct")
         if worker is not None:
-            self.shown_frames = -1
-            self._watch = QTimer()
-            self._watch.timeout.connect(lambda: self.show_store(store))
-            self._watch.start(WATCH_MS)
+            self.watch(store)
         return worker
 
-    def show_store(self, store: Path) -> None:
-        """Show the store's frames written so far (unwritten frames are NaN); stop with the job.
+    def watch(self, store: Path, on_shown=None) -> None:
+        """Show the store's frames as they are written (unwritten frames are NaN), every
+        :data:`WATCH_MS` while the job runs and once more after it.
 
         Parameters
         ----------
         store : Path
             The OME-Zarr series store being written.
+        on_shown : callable, optional
+            See :class:`~..store_view.StoreView`.
         """
-        from napari_ssdpc._napari.reader import read_result
-        from napari_ssdpc.io.store import done_frames
+        self.store_view = StoreView(self.viewer, on_shown)
+        self._watch = QTimer()
+        self._watch.timeout.connect(lambda: self._look(store))
+        self._watch.start(WATCH_MS)
 
-        running = self.runner.running
-        if store.is_dir() and (store / "ri").is_dir():
-            n = len(done_frames(store))
-            if n != self.shown_frames and n > 0:
-                self.shown_frames = n
-                layers = read_result(store, limits=False)  # metadata only
-                if not all(kw["name"] in self.viewer.layers for _, kw, _ in layers):
-                    layers = read_result(store)  # a new layer: its display limits from the data
-                for data, kwargs, kind in layers:
-                    show_layer(self.viewer, data, kwargs, kind)
-        if not running and self._watch is not None:
+    def _look(self, store: Path) -> None:
+        self.store_view.refresh(store)
+        if not self.runner.running and self._watch is not None:
             self._watch.stop()
             self._watch = None
 
-    def _streamed(self, job, rec, store: Path):
+    def _streamed(self, job, rec, report, store: Path):
         self.session.built = (job, rec)
         self.session.operators_built.emit(rec)
-        self.show_store(store)
-        return f"{store.name}: {self.shown_frames} frames written; {resolution_text(axial_fwhm_um(rec.optics))}"
+        self.store_view.refresh(store)
+        frames = report.skipped + report.written
+        return f"{store.name}: {frames} frames written; {resolution_text(axial_fwhm_um(rec.optics))}"
 
     def _done(self, job, source, rec, res, info, layers):
         self._replaced = None  # the answer replaces the first one
         self.session.built = (job, rec)
         self.session.operators_built.emit(rec)
-        self._show(layers)
+        show_in_turns(self.viewer, layers)
         shape = layers[0][0].shape
         return (
             f"{source}: {' × '.join(map(str, shape))} voxels of {' × '.join(f'{v:.3g}' for v in res.voxel_um)} µm; "
             f"{resolution_text(info['axial_fwhm_um'])}"
         )
 
-    def _show(self, layers) -> list[str]:
-        """The result's layers, shown (replaced in place when they exist); returns their names. The
-        first result is brought into view (placement.follow_results)."""
-        return [show_layer(self.viewer, data, kwargs).name for data, kwargs, _ in layers]
+
+def _put_back(viewer, replaced: dict) -> None:
+    """Layers back to the data they had (``{name: data}``; removed where data is None)."""
+    for name, data in replaced.items():
+        if name not in viewer.layers:
+            continue
+        if data is None:
+            viewer.layers.remove(name)
+        else:
+            viewer.layers[name].data = data
 
 
 def result_layers(source: str, indices, rec, arrays: dict, res) -> tuple[dict, list]:

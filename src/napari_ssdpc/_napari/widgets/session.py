@@ -46,7 +46,6 @@ class Session:
         self.built = None  # (Job, Reconstructor)
         self.operators_widget = None  # weak references, set by the widgets
         self.reconstruct_widget = None
-        self.pending_layers = 0  # layers still to be shown on later turns of the event loop (show_in_turns)
 
     def use(self, role: str, widget) -> None:
         """Make ``widget`` the one whose values count for ``role`` ('operators_widget' or
