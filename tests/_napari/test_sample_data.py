@@ -46,3 +46,32 @@ def test_the_shipped_frames_are_what_the_simulator_makes_now(tmp_path, monkeypat
     assert not list((tmp_path / "empty").rglob("*.tif"))
     for a, b in zip(made, shipped, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.slow
+def test_the_series_samples_first_frame_reads_its_dry_mass_with_the_docks_defaults():
+    """The time-series sample shows the tool where it is right: its cell (about 2 rad through it)
+    reconstructed with the dock's defaults ('tv', z ±80 µm) and measured as Objects over time does:
+    one object, its dry mass within 5 % of the truth, its centre within 2 µm of the truth's (the
+    simulator's default swimmer, 5.4 rad, read 1.26 x its mass and 16 µm off in z)."""
+    from napari_ssdpc.analysis.objects import REFRACTION_INCREMENT_UM3_PG, measure_objects
+    from napari_ssdpc.calibration import calibrate
+    from napari_ssdpc.reconstruction.reconstructor import Reconstructor
+    from napari_ssdpc.settings.config import RunConfig
+    from napari_ssdpc.simulation.moving import moving_sample
+
+    flat, white = sample_data.series_flat_white()
+    optics = sample_data.series_optics()
+    res = Reconstructor(RunConfig.of(optics), calibrate(white, optics), flat=flat).reconstruct(
+        np.asarray(sample_data.moving_sample_series(prefetch=False)[-1][0][0])
+    )
+    cell = moving_sample(sample_data.SERIES_FRAMES, **sample_data.SERIES_CELL)[0]
+    body = 4 / 3 * np.pi * np.prod(cell.semi_axes_um)
+    inclusion = 4 / 3 * np.pi * np.prod(cell.nucleus_semi_axes_um)
+    dn, dn_inclusion = cell.n - cell.medium_index, cell.n_nucleus - cell.medium_index
+    true_pg = (dn * (body - inclusion) + dn_inclusion * inclusion) / REFRACTION_INCREMENT_UM3_PG
+    [found] = measure_objects(res.delta_n, res.z_um, res.y_um, res.x_um, n_medium=optics.medium_index)
+    assert true_pg == pytest.approx(63.1, abs=0.05)
+    assert found["dry_mass_pg"] / true_pg == pytest.approx(1.0, abs=0.05)  # measured 1.018
+    centre = np.array([found["x_um"], found["y_um"], found["z_um"]])
+    assert np.linalg.norm(centre - np.array(cell.center_um)) < 2.0  # measured 1.6 µm, along z
