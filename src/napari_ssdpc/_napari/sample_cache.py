@@ -133,6 +133,21 @@ def cached(name: str, make, key: str = "") -> np.ndarray:
     return data
 
 
+#: How much lower than the GUI a background simulation runs (a thread's nice value, Linux).
+BACKGROUND_NICE = 10
+
+
+def background_priority() -> None:
+    """Lower the calling thread's scheduling priority (Linux: its nice value, per thread), so that
+    napari's thread and the user's jobs go first on a busy machine; elsewhere nothing changes (a
+    thread id there is no process id to renice)."""
+    import sys
+
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError):
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), BACKGROUND_NICE)
+
+
 class Prefetch:
     """Simulates (or reads from the cache) every frame of a series in a background thread that stops
     when napari exits (:func:`stop_background`).
@@ -174,6 +189,7 @@ class Prefetch:
             return next((i for i in order if i not in self.made), None)
 
     def _run(self) -> None:
+        background_priority()
         while not EXITING.is_set() and (i := self._pick()) is not None:
             try:
                 self.make(i)

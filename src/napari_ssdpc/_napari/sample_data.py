@@ -261,43 +261,37 @@ def series_frame(i: int, n_frames: int = SERIES_FRAMES) -> np.ndarray:
     ndarray, uint16, (H, W)
     """
     from napari_ssdpc.simulation.moving import moving_sample
-    from napari_ssdpc.simulation.multislice import Source
-    from napari_ssdpc.simulation.simulate import simulate
 
     optics = series_optics()
     phantom = moving_sample(n_frames, **SERIES_CELL)[i]
-    source = Source(step=SERIES_SOURCE_STEP)
     key = sample_cache.key("moving", _physics(optics), repr(phantom), SERIES_SOURCE_STEP, 1000 + i, __version__)
-    return sample_cache.cached(
-        f"moving_{n_frames}_{i:03d}",
-        lambda: (
-            simulate(
-                phantom,
-                optics,
-                source=source,
-                rng=np.random.default_rng(1000 + i),
-                progress=sample_cache.unless_exiting,
-            ).frame
-        ),
-        key,
-    )
+
+    def simulated():  # only when not shipped nor cached: the simulator loads then
+        from napari_ssdpc.simulation.multislice import Source
+        from napari_ssdpc.simulation.simulate import simulate
+
+        source, rng = Source(step=SERIES_SOURCE_STEP), np.random.default_rng(1000 + i)
+        return simulate(phantom, optics, source=source, rng=rng, progress=sample_cache.unless_exiting).frame
+
+    return sample_cache.cached(f"moving_{n_frames}_{i:03d}", simulated, key)
 
 
 def series_flat_white():
     """Flat (same reduced source sampling as the series) and white frames of the series' optics."""
-    from napari_ssdpc.simulation.multislice import Source
-    from napari_ssdpc.simulation.sample_free import flat_frame, white_frame
-
     optics = series_optics()
     base = (_physics(optics), SERIES_SOURCE_STEP, __version__)
-    flat = sample_cache.cached(
-        "moving_flat",
-        lambda: flat_frame(optics, source=Source(step=SERIES_SOURCE_STEP), rng=np.random.default_rng(3)),
-        sample_cache.key("flat", *base, 3),
-    )
-    white = sample_cache.cached(
-        "moving_white", lambda: white_frame(optics, rng=np.random.default_rng(4)), sample_cache.key("white", *base, 4)
-    )
+
+    def simulated(kind: str, seed: int):  # only when not shipped nor cached: the simulator loads then
+        from napari_ssdpc.simulation.multislice import Source
+        from napari_ssdpc.simulation.sample_free import flat_frame, white_frame
+
+        rng = np.random.default_rng(seed)
+        if kind == "flat":
+            return flat_frame(optics, source=Source(step=SERIES_SOURCE_STEP), rng=rng)
+        return white_frame(optics, rng=rng)
+
+    flat = sample_cache.cached("moving_flat", lambda: simulated("flat", 3), sample_cache.key("flat", *base, 3))
+    white = sample_cache.cached("moving_white", lambda: simulated("white", 4), sample_cache.key("white", *base, 4))
     return flat, white
 
 
