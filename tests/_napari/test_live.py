@@ -93,7 +93,7 @@ def test_a_recording_being_written_grows_the_layer_and_a_rerun_recomputes_nothin
     rc.cancel_button.native.click()
     _steps.wait_for(qtbot, rc)
     assert time.monotonic() - start < 5 and rc.status.value == "cancelled" and rc.live.button.enabled
-    assert rc.live._timer is None and list(done_frames(store)) == list(range(FRAMES))
+    assert rc._watch is None and list(done_frames(store)) == list(range(FRAMES))
 
 
 def test_following_needs_a_recording_and_a_store(make_napari_viewer, monkeypatch, tmp_path):

@@ -16,10 +16,8 @@ from pathlib import Path
 
 import numpy as np
 from magicgui.widgets import FileEdit, FloatSpinBox, PushButton
-from qtpy.QtCore import QTimer
 
 from napari_ssdpc._napari import notify
-from napari_ssdpc._napari.store_view import StoreView
 from napari_ssdpc.errors import Cancelled, SsdpcError
 
 __all__ = ["LIVE_MS", "LiveFollow", "latency_text"]
@@ -85,7 +83,6 @@ class LiveFollow:
         self.source = None  # the FollowedFrames of the running job, once its first frame arrived
         self.written_s: dict[int, float] = {}
         self.shown_s: dict[int, float] = {}
-        self._timer = None
         self._summary = None  # (store, report, idle_s) of the run that ended
 
     def start(self):
@@ -121,11 +118,8 @@ class LiveFollow:
             return None
         self.button.enabled = False
         self._summary = None
-        rc.store_view = StoreView(rc.viewer, on_shown=self._shown)
-        self._timer = QTimer()
-        self._timer.timeout.connect(lambda: rc.store_view.refresh(Path(store)))
-        self._timer.start(LIVE_MS)
-        worker.finished.connect(lambda: self._ended(Path(store)))
+        rc.watch(Path(store), worker, on_shown=self._shown, every_ms=LIVE_MS)
+        worker.finished.connect(lambda: setattr(self.button, "enabled", True))
         return worker
 
     def _work(self, path: str, idle_s: float, job, built, sink):
@@ -181,8 +175,7 @@ class LiveFollow:
         """The job's end (no new frame for the idle time): operators kept, last frames shown, latency."""
         self.rc.session.built = (job, rec)
         self.rc.session.operators_built.emit(rec)
-        self._summary = (store, report, idle_s)
-        self.rc.store_view.refresh(store)  # the summary again once the last frames are shown
+        self._summary = (store, report, idle_s)  # written again once the last frames are shown
         return self._summary_text()
 
     def _summary_text(self) -> str:
@@ -192,11 +185,3 @@ class LiveFollow:
             f"latency from frame on disk to volume written {latency_text(self.written_s.values())}, to layer shown "
             f"{latency_text(self.shown_s.values())}; no new frame for {idle_s:g} s: stopped"
         )
-
-    def _ended(self, store: Path) -> None:
-        """The job has finished, cancelled or failed: show what the store holds, stop watching."""
-        if self._timer is not None:
-            self._timer.stop()
-            self._timer = None
-        self.rc.store_view.refresh(store)
-        self.button.enabled = True

@@ -278,35 +278,40 @@ class ReconstructWidget(StepWidget):
 
         worker = self.runner.start(work, lambda r: self._streamed(job, *r, store), "Reconstruct")
         if worker is not None:
-            self.watch(store)
+            self.watch(store, worker)
         return worker
 
-    def watch(self, store: Path, on_shown=None) -> None:
+    def watch(self, store: Path, worker, on_shown=None, every_ms: int = WATCH_MS) -> None:
         """Show the store's frames as they are written (unwritten frames are NaN), every
-        :data:`WATCH_MS` while the job runs and once more after it.
+        ``every_ms`` while ``worker`` runs and once more when it has ended.
 
         Parameters
         ----------
         store : Path
             The OME-Zarr series store being written.
+        worker : napari worker
+            The job writing it.
         on_shown : callable, optional
             See :class:`~..store_view.StoreView`.
+        every_ms : int
+            Time between two looks at the store, ms.
         """
         self.store_view = StoreView(self.viewer, on_shown)
         self._watch = QTimer()
-        self._watch.timeout.connect(lambda: self._look(store))
-        self._watch.start(WATCH_MS)
+        self._watch.timeout.connect(lambda: self.store_view.refresh(store))
+        self._watch.start(every_ms)
+        worker.finished.connect(lambda: self._watched(store))
 
-    def _look(self, store: Path) -> None:
-        self.store_view.refresh(store)
-        if not self.runner.running and self._watch is not None:
+    def _watched(self, store: Path) -> None:
+        """The job has ended (finished, cancelled or failed): the last look at the store."""
+        if self._watch is not None:
             self._watch.stop()
             self._watch = None
+        self.store_view.refresh(store)
 
     def _streamed(self, job, rec, report, store: Path):
         self.session.built = (job, rec)
         self.session.operators_built.emit(rec)
-        self.store_view.refresh(store)
         frames = report.skipped + report.written
         return f"{store.name}: {frames} frames written; {resolution_text(axial_fwhm_um(rec.optics))}"
 
