@@ -22,6 +22,11 @@ from napari_ssdpc.errors import SsdpcError
 __all__ = ["StoreView"]
 
 
+#: Views with a read under way: kept alive until it arrives (a view replaced meanwhile would take its
+#: receiver with it, and the read, counted as pending by the turns, would never arrive).
+_READING: set[StoreView] = set()
+
+
 class _Arrivals(QObject):
     """Hands a helper thread's reading to the GUI thread (a queued Qt signal)."""
 
@@ -64,6 +69,7 @@ class StoreView:
             self._again = store
             return
         self._reading = True
+        _READING.add(self)
         turns.expect()
         known = {lyr.name for lyr in self.viewer.layers}
         start_helper(partial(self._read, Path(store), known, self.frames), "napari-ssdpc store view")
@@ -89,6 +95,7 @@ class StoreView:
     def _arrived(self, reading) -> None:
         store, done, layers, error = reading
         self._reading = False
+        _READING.discard(self)
         turns.arrived()
         if error is not None:
             notify.error(error)
