@@ -54,6 +54,16 @@ def _stop_jobs() -> None:
         thread.join(timeout=30.0)
 
 
+def _room_for_one_more() -> None:
+    """napari's workers share Qt's global thread pool, as many threads as cores: on 2 cores a job
+    beside a followed recording and a movie would wait, unseen, for one of them to end. Each job
+    relays a helper thread (it waits, it does not compute): the pool grows to start it now."""
+    from qtpy.QtCore import QThreadPool
+
+    pool = QThreadPool.globalInstance()
+    pool.setMaxThreadCount(max(pool.maxThreadCount(), pool.activeThreadCount() + 1))
+
+
 def start_helper(target, name: str) -> threading.Thread:
     """Start ``target()`` in a daemon thread that the interpreter's exit waits for (a short read
     off the GUI thread; a thread torn down inside a C library aborts the exit).
@@ -202,6 +212,7 @@ class JobRunner:
         worker.aborted.connect(self._on_aborted)
         worker.finished.connect(self._on_finished)
         self.worker = worker
+        _room_for_one_more()
         worker.start()
         return worker
 
