@@ -5,7 +5,8 @@
   with a 1024 x 1024 px camera region that holds the whole pupil. The three frames ship with the
   package (``data/``, 3 MB, written by :func:`ship_frames`), so the sample opens in about
   0.5 s; were they stale, it would be simulated (about a minute on two cores) and cached.
-- ``moving_sample_series``: a swimming cell-like sample in water (``moving.moving_sample``),
+- ``moving_sample_series``: a swimming cell-like sample in water (``moving.moving_sample`` with
+  :data:`SERIES_CELL`, a cell 'tv' measures right),
   20 frames, the bead's optics (condenser NA 0.3, where the lenslets carry phase contrast, and the
   1024 x 1024 px region). Reduced cost: the condenser disk is sampled every 4 lattice units
   (``Source(step=4)``; at most 3 % of the peak intensity different from the full sampling; about
