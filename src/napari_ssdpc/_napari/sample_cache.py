@@ -8,6 +8,7 @@ import contextlib
 import hashlib
 import json
 import os
+import sys
 import threading
 import time
 from pathlib import Path
@@ -141,8 +142,6 @@ def background_priority() -> None:
     """Lower the calling thread's scheduling priority (Linux: its nice value, per thread), so that
     napari's thread and the user's jobs go first on a busy machine; elsewhere nothing changes (a
     thread id there is no process id to renice)."""
-    import sys
-
     if sys.platform.startswith("linux"):
         with contextlib.suppress(OSError):
             os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), BACKGROUND_NICE)

@@ -15,14 +15,14 @@ from pathlib import Path
 from qtpy.QtCore import QObject, Signal
 
 from napari_ssdpc._napari import notify, turns
-from napari_ssdpc._napari.widgets.common import show_layer
+from napari_ssdpc._napari.widgets.common import show_in_turns
 from napari_ssdpc._napari.widgets.jobs import start_helper
 from napari_ssdpc.errors import SsdpcError
 
 __all__ = ["StoreView"]
 
 
-#: Views with a read under way: kept alive until it arrives (a view replaced meanwhile would take its
+#: Views with a read under way, kept alive until it arrives (a view replaced meanwhile would take its
 #: receiver with it, and the read, counted as pending by the turns, would never arrive).
 _READING: set[StoreView] = set()
 
@@ -52,7 +52,6 @@ class StoreView:
     def __init__(self, viewer, on_shown=None):
         self.viewer, self.on_shown = viewer, on_shown
         self.frames = -1
-        self._reading = False
         self._again: Path | None = None
         self._arrivals = _Arrivals()
         self._arrivals.read.connect(self._arrived)
@@ -65,10 +64,9 @@ class StoreView:
         store : Path
             The OME-Zarr store being written.
         """
-        if self._reading:
+        if self in _READING:
             self._again = store
             return
-        self._reading = True
         _READING.add(self)
         turns.expect()
         known = {lyr.name for lyr in self.viewer.layers}
@@ -94,15 +92,13 @@ class StoreView:
 
     def _arrived(self, reading) -> None:
         store, done, layers, error = reading
-        self._reading = False
         _READING.discard(self)
         turns.arrived()
         if error is not None:
             notify.error(error)
         elif layers is not None:
             self.frames = len(done)
-            for data, kwargs, kind in layers:  # a newer reading replaces one still waiting
-                turns.later(partial(show_layer, self.viewer, data, kwargs, kind), key=(self, kwargs["name"]))
+            show_in_turns(self.viewer, layers, key=self)  # a newer reading replaces one still waiting
             if self.on_shown is not None:
                 turns.later(partial(self.on_shown, done), key=(self, "shown"))
         if self._again is not None:

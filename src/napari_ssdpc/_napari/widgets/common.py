@@ -142,7 +142,7 @@ def show_layer(viewer, data, kwargs: dict, layer_type: str = "image"):
     return getattr(viewer, f"add_{layer_type}")(data, **kwargs)
 
 
-def show_in_turns(viewer, layers) -> None:
+def show_in_turns(viewer, layers, key=None) -> None:
     """Show layers one per turn of the event loop (:func:`..turns.later`): napari adding several
     layers in one event (a calibration's circles, labelled centres and deviations; a result's
     quantities) stalls the GUI for their sum; between turns it draws and answers.
@@ -152,9 +152,12 @@ def show_in_turns(viewer, layers) -> None:
     viewer : napari.Viewer
     layers : list of (data, kwargs, type)
         As :func:`show_layer` takes them.
+    key : hashable, optional
+        A layer shown again under the same key (a store's newer reading) replaces the one still
+        waiting.
     """
-    for layer in layers:
-        later(partial(show_layer, viewer, *layer))
+    for data, kwargs, kind in layers:
+        later(partial(show_layer, viewer, data, kwargs, kind), key=None if key is None else (key, kwargs["name"]))
 
 
 def catching_warnings(fn, *args, **kwargs):

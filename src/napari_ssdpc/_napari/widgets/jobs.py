@@ -64,23 +64,32 @@ def _room_for_one_more() -> None:
     pool.setMaxThreadCount(max(pool.maxThreadCount(), pool.activeThreadCount() + 1))
 
 
-def start_helper(target, name: str) -> threading.Thread:
-    """Start ``target()`` in a daemon thread that the interpreter's exit waits for (a short read
-    off the GUI thread; a thread torn down inside a C library aborts the exit).
+def start_helper(target, name: str, stop: threading.Event | None = None) -> threading.Thread:
+    """Start ``target()`` in a daemon thread that the interpreter's exit stops and waits for (a
+    thread torn down inside a C library aborts the exit).
 
     Parameters
     ----------
     target : callable
     name : str
         The thread's name.
+    stop : threading.Event, optional
+        Set at exit (the target's ``should_stop``); a short read needs none.
 
     Returns
     -------
     threading.Thread
     """
-    _RUNNING.difference_update({r for r in _RUNNING if r[0].name == name and not r[0].is_alive()})  # done before
-    thread = threading.Thread(target=target, name=name, daemon=True)
-    _RUNNING.add((thread, threading.Event()))
+    flag = stop or threading.Event()
+
+    def run():
+        try:
+            target()
+        finally:
+            _RUNNING.discard((thread, flag))
+
+    thread = threading.Thread(target=run, name=name, daemon=True)
+    _RUNNING.add((thread, flag))
     thread.start()
     return thread
 
@@ -105,12 +114,12 @@ def _relay(fn, stop: threading.Event):
             raise Cancelled("cancelled")
         reports.put((int(done), int(total), str(label)))
 
-    def partial(value):
+    def first_answer(value):
         if stop.is_set():
             raise Cancelled("cancelled")
         reports.put(Partial(value))
 
-    progress.partial = partial  # type: ignore[attr-defined]
+    progress.partial = first_answer  # type: ignore[attr-defined]
 
     def target():
         try:
@@ -120,10 +129,7 @@ def _relay(fn, stop: threading.Event):
         finally:
             reports.put(None)
 
-    thread = threading.Thread(target=target, name="napari-ssdpc job", daemon=True)
-    running = (thread, stop)
-    _RUNNING.add(running)
-    thread.start()
+    thread = start_helper(target, "napari-ssdpc job", stop)
     try:
         while (msg := reports.get()) is not None:
             yield msg
@@ -131,7 +137,6 @@ def _relay(fn, stop: threading.Event):
         if thread.is_alive():  # closed early: stop the core at its next iteration
             stop.set()
         thread.join()
-        _RUNNING.discard(running)
     if "error" in box:
         raise box["error"]
     return box["value"]

@@ -133,7 +133,7 @@ class ReconstructWidget(StepWidget):
             ]
         )
         self.runner = JobRunner("Reconstruct", self.run_button, self.cancel_button, self.status)
-        self._watch, self.store_view = None, StoreView(napari_viewer)  # a store being written, shown as it grows
+        self._watch, self.store_view = None, None  # a store being written, shown as it grows (watch)
         self.run_button.changed.connect(self.run)
         self.session.optics_loaded.connect(self._defaults)
         self.session.settings_loaded.connect(self.show_settings)
